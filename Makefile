@@ -1,0 +1,48 @@
+# The two commands of the quick start: `make test` and `make sim`.
+# Each creates .venv from pyproject.toml when it is missing or older than pyproject.toml.
+PY ?= python3.11
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
+export MPLBACKEND := Agg
+
+.PHONY: test lint typecheck pytest sim bench e2e venv clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: $(STAMP)
+	$(BIN)/mypy
+
+pytest: $(STAMP)
+	$(BIN)/pytest -q
+
+test: lint typecheck pytest
+
+sim: $(STAMP)
+	$(BIN)/phenorover sim
+
+bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[bench]' || echo "open3d not installable here: Embree comparison skipped"
+	$(BIN)/python -c "import open3d" 2>/dev/null || echo "open3d does not load (Debian: apt-get install libusb-1.0-0): Embree comparison skipped"
+	$(BIN)/python tests/bench/run_all.py
+
+# The dashboard in a real browser: Debian's chromium (apt-get install chromium) opens
+# the served web viewer during a short simulated survey; about two minutes.
+e2e: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[e2e]'
+	PHENOROVER_E2E=1 $(BIN)/pytest -q tests/e2e
+
+clean:
+	rm -rf $(VENV) .cache .mypy_cache .ruff_cache runs

@@ -1,0 +1,1 @@
+"""phenorover's one source of truth: messages, keys, transport, config, clock, geometry."""

@@ -1,0 +1,167 @@
+"""Deploy manifests and service configs: TOML decoded into msgspec Structs.
+
+A manifest (``deploy/<machine>.toml``) names the machine, its Zenoh endpoints, its
+clock, and the services it runs with their config sections. Every config Struct
+forbids unknown fields, so a typo is one clear error before anything starts::
+
+    deploy/sim.toml: [services.gnss]: Object contains unknown field `buad`
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Any, Literal, TypeVar
+
+import msgspec
+import zenoh
+
+C = TypeVar("C")
+
+
+class ConfigError(ValueError):
+    """A config or manifest is wrong; the message is one line naming file and key."""
+
+
+class TlsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """TLS for the links between machines (``tls/`` endpoints). Paths are PEM files.
+
+    With ``mutual`` both sides present certificates signed by ``root_ca``.
+    """
+
+    root_ca: str
+    certificate: str = ""
+    private_key: str = ""
+    mutual: bool = False
+
+
+class ZenohSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """This machine's Zenoh: the router hosted by ``phenorover up`` listens on
+    ``listen`` and connects to the other machines' routers in ``connect``; the
+    services on this machine are peers that connect to the local router (and mesh
+    among themselves on loopback). Multicast scouting is always off."""
+
+    listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    connect: list[str] = msgspec.field(default_factory=list)
+    # where the services and the CLI on this machine reach the router
+    local: list[str] = msgspec.field(default_factory=list)
+    tls: TlsConfig | None = None
+
+    def local_endpoints(self) -> list[str]:
+        return self.local or [e.replace("0.0.0.0", "127.0.0.1") for e in self.listen]
+
+
+class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """One machine's deployment. ``field`` is the field being surveyed (an example
+    name such as ``engr`` or a field file): its georeference defines the ``field``
+    frame for every service."""
+
+    machine: str
+    field: str = "engr"
+    clock: Literal["wall", "sim"] = "wall"
+    zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
+    # service name -> its config section, decoded by the service's own Config type
+    services: dict[str, dict[str, Any]] = msgspec.field(default_factory=dict)
+    run_dir: str = "runs"
+
+
+def _one_line(exc: Exception) -> str:
+    return " ".join(str(exc).split())
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {_one_line(exc)}") from None
+
+
+def load_manifest(path: str | Path) -> Manifest:
+    p = Path(path)
+    try:
+        return msgspec.convert(read_toml(p), type=Manifest)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{p}: {_one_line(exc)}") from None
+
+
+def decode_section(section: dict[str, Any], type_: type[C], where: str) -> C:
+    """Validate a config section as ``type_``; ``where`` names it in errors."""
+    try:
+        return msgspec.convert(section, type=type_)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{where}: {_one_line(exc)}") from None
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text  # a bare word is a string: --set backend=sim
+
+
+def apply_overrides(section: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Apply ``key.sub=value`` overrides (values in TOML syntax, bare words as strings)."""
+    out = json.loads(json.dumps(section))  # deep copy of plain data
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--set {item!r}: expected key=value")
+        node = out
+        parts = key.split(".")
+        for p in parts[:-1]:
+            child = node.setdefault(p, {})
+            if not isinstance(child, dict):
+                raise ConfigError(f"--set {item!r}: {p} is not a table")
+            node = child
+        node[parts[-1]] = _parse_value(value)
+    return out
+
+
+def _drop_none(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _drop_none(v) for k, v in x.items() if v is not None}
+    if isinstance(x, list):
+        return [_drop_none(v) for v in x]
+    return x
+
+
+def dump_toml(cfg: msgspec.Struct) -> str:
+    """The config as TOML; optional keys left unset (None) are omitted, as TOML has no
+    null and an absent key decodes back to None."""
+    return msgspec.toml.encode(_drop_none(msgspec.to_builtins(cfg))).decode()
+
+
+def zenoh_config(
+    mode: Literal["peer", "client", "router"],
+    listen: list[str],
+    connect: list[str],
+    tls: TlsConfig | None = None,
+    client_timeout_s: float = 10.0,
+) -> zenoh.Config:
+    """An explicit Zenoh config: no multicast scouting, endpoints as given, and a fast
+    reconnect (0.1-1 s) so a restarted peer is back within a second, not four."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
+    conf.insert_json5("connect/endpoints", json.dumps(connect))
+    if mode == "client":
+        # a CLI started right after `phenorover up` waits for the router to come up
+        conf.insert_json5("connect/timeout_ms", str(int(client_timeout_s * 1000)))
+    conf.insert_json5("connect/retry", json.dumps({"period_init_ms": 100, "period_max_ms": 1000}))
+    if tls is not None:
+        t: dict[str, Any] = {"root_ca_certificate": tls.root_ca}
+        if tls.certificate:
+            t["listen_certificate"] = tls.certificate
+            t["connect_certificate"] = tls.certificate
+        if tls.private_key:
+            t["listen_private_key"] = tls.private_key
+            t["connect_private_key"] = tls.private_key
+        if tls.mutual:
+            t["enable_mtls"] = True
+        conf.insert_json5("transport/link/tls", json.dumps(t))
+    return conf

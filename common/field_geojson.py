@@ -1,0 +1,200 @@
+"""Fields from GeoJSON plot polygons, and WGS84 <-> ``field`` frame conversion.
+
+A plot file is a FeatureCollection of Polygon features in WGS84 (lon, lat), one per plot,
+optionally with a ``height`` property (metres). A foreign member ``"phenorover"`` holds
+settings (:class:`GeoSettings`); without ``row_bearing_deg`` the bearing is taken from
+the longest edge of the first polygon. Polygons must be axis-aligned rectangles once
+rotated by the row bearing.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+from common.field import (
+    Corner,
+    Field,
+    FieldError,
+    FieldLayout,
+    NonNeg,
+    Pos,
+    assemble,
+    load_field,
+)
+from common.geo import FieldFrame
+
+F64 = npt.NDArray[np.float64]
+
+
+class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Settings that polygons cannot carry (see :class:`common.field.FieldLayout`)."""
+
+    name: str = "field"
+    row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] | None = None
+    plot_height: Pos = 1.0
+    headland_width: Pos = 2.0
+    edge_width: Pos = 1.5
+    voxel_x: Pos = 0.5
+    voxel_y: Pos = 0.5
+    voxel_z: Pos = 0.33
+    min_scan_distance: NonNeg = 0.6
+    robot_half_length: NonNeg = 0.495
+    robot_half_width: NonNeg = 0.335
+    origin_alt: float = 0.0
+    start_corner: Corner = "bottom-right"
+
+
+class _Polygon(msgspec.Struct, frozen=True):
+    type: Literal["Polygon"]
+    coordinates: list[list[list[float]]]
+
+
+class _Feature(msgspec.Struct, frozen=True):
+    type: Literal["Feature"]
+    geometry: _Polygon
+    properties: dict[str, Any] | None = None
+
+
+class _Collection(msgspec.Struct, frozen=True, rename={"settings": "phenorover"}):
+    type: Literal["FeatureCollection"]
+    features: list[_Feature]
+    settings: GeoSettings = msgspec.field(default_factory=GeoSettings)
+
+
+def field_frame(layout: FieldLayout) -> FieldFrame:
+    """The :class:`common.geo.FieldFrame` of a georeferenced layout; raises ValueError
+    when ``origin_lat``/``origin_lon`` are missing."""
+    if layout.origin_lat is None or layout.origin_lon is None:
+        raise ValueError(f"field {layout.name!r} has no origin_lat/origin_lon")
+    return FieldFrame(
+        layout.origin_lat, layout.origin_lon, layout.origin_alt, layout.row_bearing_deg
+    )
+
+
+def load_frame(source: str) -> FieldFrame:
+    """The field frame of a field file or example (what every service of a deployment
+    shares); raises FieldError when it cannot be read or is not georeferenced."""
+    layout, _ = load_field(source)
+    try:
+        return field_frame(layout)
+    except ValueError as exc:
+        raise FieldError(f"{source}: {exc}") from None
+
+
+def field_to_wgs84(layout: FieldLayout, xy: F64) -> F64:
+    """(N, 2) field x, y metres -> (N, 2) lon, lat degrees (GeoJSON order)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    lat, lon, _ = field_frame(layout).field_to_wgs84(xy[:, 0], xy[:, 1])
+    return np.stack([np.asarray(lon), np.asarray(lat)], axis=-1)
+
+
+def _groups(centres: F64, tol: float) -> npt.NDArray[np.int64]:
+    """Index of the band each centre falls in, bands ordered by increasing centre."""
+    order = np.argsort(centres)
+    band = np.zeros(len(centres), dtype=np.int64)
+    band[order] = np.concatenate([[0], np.cumsum(np.diff(centres[order]) > tol)])
+    return band
+
+
+def _bearing_guess(ring: F64) -> float:
+    d = np.diff(ring, axis=0)
+    k = int(np.argmax(np.hypot(d[:, 0], d[:, 1])))
+    return math.degrees(math.atan2(d[k, 0], d[k, 1])) % 180.0
+
+
+def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
+    """Decode a plot FeatureCollection; raises FieldError naming ``source``."""
+    try:
+        fc = msgspec.json.decode(data, type=_Collection)
+    except msgspec.DecodeError as exc:
+        hint = " (every plot must be a Polygon Feature)" if "geometry" in str(exc) else ""
+        raise FieldError(f"{source}: {' '.join(str(exc).split())}{hint}") from None
+    if not fc.features:
+        raise FieldError(f"{source}: the FeatureCollection has no plot polygons")
+    s = fc.settings
+    rings: list[F64] = []
+    for i, feat in enumerate(fc.features):
+        ring = feat.geometry.coordinates[0] if feat.geometry.coordinates else []
+        if len(ring) < 4 or any(len(p) < 2 for p in ring):
+            raise FieldError(f"{source}: feature {i} is not a polygon of at least 3 corners")
+        rings.append(np.array([p[:2] for p in ring], dtype=np.float64))
+    lon0, lat0 = rings[0][0]
+    if not (-180 <= lon0 <= 180 and -90 <= lat0 <= 90):
+        raise FieldError(f"{source}: first vertex ({lon0}, {lat0}) is not WGS84 lon, lat")
+    # a provisional frame at the first vertex; shifted to the boundary corner below
+    frame = FieldFrame(lat0, lon0, 0.0, 0.0)
+    enu = [np.stack(frame.wgs84_to_map(r[:, 1], r[:, 0])[:2], axis=-1) for r in rings]
+    bearing = s.row_bearing_deg if s.row_bearing_deg is not None else _bearing_guess(enu[0])
+    frame = FieldFrame(lat0, lon0, 0.0, bearing)
+    boxes = np.zeros((len(rings), 6))
+    for i, (en, feat) in enumerate(zip(enu, fc.features, strict=True)):
+        xy = np.stack(frame.map_to_field(en[:, 0], en[:, 1]), axis=-1)
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        area = 0.5 * abs(np.dot(xy[:-1, 0], xy[1:, 1]) - np.dot(xy[1:, 0], xy[:-1, 1]))
+        if area < 0.95 * float(np.prod(hi - lo)):
+            raise FieldError(
+                f"{source}: plot {i} is not an axis-aligned rectangle after rotating by "
+                f"row_bearing_deg={bearing:.2f}"
+            )
+        h = (feat.properties or {}).get("height", s.plot_height)
+        if not isinstance(h, int | float) or h <= 0:
+            raise FieldError(f"{source}: plot {i} has height={h!r}, expected metres > 0")
+        boxes[i] = [lo[0], lo[1], 0.0, hi[0], hi[1], float(h)]
+    cx, cy = (boxes[:, 0] + boxes[:, 3]) / 2, (boxes[:, 1] + boxes[:, 4]) / 2
+    length = float(np.median(boxes[:, 3] - boxes[:, 0]))
+    width = float(np.median(boxes[:, 4] - boxes[:, 1]))
+    row, col = _groups(cy, width / 2), _groups(cx, length / 2)
+    nrows, ncols = int(row.max()) + 1, int(col.max()) + 1
+    if len(set(zip(row.tolist(), col.tolist(), strict=True))) != len(boxes):
+        raise FieldError(f"{source}: two plots share a row and column (overlapping plots?)")
+
+    shift = np.array([boxes[:, 0].min() - s.headland_width, boxes[:, 1].min() - s.edge_width])
+    boxes[:, [0, 3]] -= shift[0]
+    boxes[:, [1, 4]] -= shift[1]
+    bounds = np.array(
+        [0.0, 0.0, boxes[:, 3].max() + s.headland_width, boxes[:, 4].max() + s.edge_width]
+    )
+    olat, olon, _ = frame.field_to_wgs84(shift[0], shift[1])
+
+    def gap(lo_col: int, hi_col: int, band: npt.NDArray[np.int64], n: int) -> float:
+        if n < 2:
+            return 1.0
+        lo = np.array([boxes[band == k, lo_col].min() for k in range(n)])
+        hi = np.array([boxes[band == k, hi_col].max() for k in range(n)])
+        return float(np.median(lo[1:] - hi[:-1]))
+
+    try:
+        layout = FieldLayout(
+            name=s.name,
+            rows=nrows,
+            plots_per_row=ncols,
+            plot_length=length,
+            plot_width=width,
+            plot_height=float(np.median(boxes[:, 5])),
+            row_spacing=gap(1, 4, row, nrows),
+            alley_width=gap(0, 3, col, ncols),
+            headland_width=s.headland_width,
+            edge_width=s.edge_width,
+            voxel_x=s.voxel_x,
+            voxel_y=s.voxel_y,
+            voxel_z=s.voxel_z,
+            min_scan_distance=s.min_scan_distance,
+            robot_half_length=s.robot_half_length,
+            robot_half_width=s.robot_half_width,
+            origin_lat=float(olat),
+            origin_lon=float(olon),
+            origin_alt=s.origin_alt,
+            row_bearing_deg=float(bearing),
+            start_corner=s.start_corner,
+        )
+        # the constructor does not validate; a round trip through msgspec does
+        layout = msgspec.convert(msgspec.to_builtins(layout), FieldLayout)
+        field = assemble(layout, boxes, row, col, bounds)
+    except (msgspec.ValidationError, FieldError) as exc:
+        raise FieldError(f"{source}: {' '.join(str(exc).split())}") from None
+    return layout, field

@@ -1,0 +1,135 @@
+"""Every Zenoh key expression phenorover uses, with its message type.
+
+One table, so a subscriber cannot disagree with its publisher about a key or a type.
+Keys with ``{placeholders}`` are templates: ``GNSS_FIX.at(antenna=1)``.
+``TOPICS`` maps each key to its message type; ``RPCS`` maps each query key to its
+(request, reply) types.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Generic, TypeVar
+
+from common.messages import base, gnss, mission, nav, plan, scan, sim, system
+
+PREFIX = "phenorover"
+
+M = TypeVar("M")
+Q = TypeVar("Q")
+R = TypeVar("R")
+
+
+@dataclasses.dataclass(frozen=True)
+class Topic(Generic[M]):
+    """A published stream: its key, message type and delivery class.
+
+    ``bulk`` topics (point clouds, plans) are published with congestion control BLOCK
+    so a slow subscriber slows the publisher instead of losing data; ``control``
+    topics get Zenoh's real-time priority and DROP, where only the newest value matters.
+    """
+
+    key: str
+    type: type[M]
+    bulk: bool = False
+    control: bool = False
+
+    def at(self, **params: Any) -> Topic[M]:
+        return dataclasses.replace(self, key=self.key.format(**params))
+
+
+@dataclasses.dataclass(frozen=True)
+class Rpc(Generic[Q, R]):
+    """A query/reply endpoint: the key a service answers on, request and reply types."""
+
+    key: str
+    request: Any  # a Struct type or a tagged union of them
+    reply: type[R]
+
+    def at(self, **params: Any) -> Rpc[Q, R]:
+        return dataclasses.replace(self, key=self.key.format(**params))
+
+
+def _k(path: str) -> str:
+    return f"{PREFIX}/{path}"
+
+
+# liveliness tokens: alive/<machine>/<service>/<pid>/<since_ns>
+ALIVE = _k("alive/{machine}/{service}/{pid}/{since_ns}")
+ALIVE_ALL = _k("alive/**")
+
+HEALTH = Topic(_k("health/{service}"), system.Health)
+PING = Rpc[system.Ping, system.Pong](_k("rpc/{service}/ping"), system.Ping, system.Pong)
+
+SIM_CLOCK = Topic(_k("sim/clock"), sim.SimClock, control=True)
+SIM_TRUTH = Topic(_k("sim/truth/pose"), sim.TruthPose)
+# the simulated devices' "hardware": read only by the sim backends of gnss, base, scanner
+SIM_ANTENNAS = Topic(_k("sim/device/antennas"), sim.SimAntennas)
+SIM_WHEELS = Topic(_k("sim/device/wheels"), sim.SimWheelCommand, control=True)
+SIM_ENCODERS = Topic(_k("sim/device/encoders"), sim.SimEncoders)
+SIM_LIDAR = Topic(_k("sim/device/lidar"), base.LaserScan)
+SIM_RENDER = Rpc[sim.RenderRequest, sim.RenderReply](
+    _k("rpc/sim/render"), sim.RenderRequest, sim.RenderReply
+)
+
+GNSS_FIX = Topic(_k("gnss/{antenna}/fix"), gnss.NavSatFix)
+GNSS_HEADING = Topic(_k("gnss/heading"), gnss.GnssHeading)
+
+BASE_CMD_VEL = Topic(_k("base/cmd_vel"), base.Twist, control=True)
+BASE_ODOM = Topic(_k("base/odom"), base.Odometry)
+BASE_SCAN = Topic(_k("base/scan"), base.LaserScan)
+BASE_ESTOP = Topic(_k("base/estop"), base.EStop, control=True)
+BASE_STATUS = Topic(_k("base/status"), base.BaseStatus)
+
+NAV_POSE = Topic(_k("nav/pose"), nav.PoseEstimate)
+NAV_PROGRESS = Topic(_k("nav/progress"), nav.NavProgress)
+NAV_CMD = Rpc[nav.NavCommand, nav.NavReply](_k("rpc/nav/cmd"), nav.NavCommand, nav.NavReply)
+
+SCANNER_STATUS = Topic(_k("scanner/status"), scan.ScannerStatus)
+SCANNER_CMD = Rpc[scan.ScannerCommand, scan.ScannerReply](
+    _k("rpc/scanner/cmd"), scan.ScannerCommand, scan.ScannerReply
+)
+
+PLANNER_PLAN = Rpc[plan.PlanRequest, plan.PlanResult](
+    _k("rpc/planner/plan"), plan.PlanRequest, plan.PlanResult
+)
+
+MISSION_STATE = Topic(_k("mission/state"), mission.MissionState)
+MISSION_EVENT = Topic(_k("mission/event"), mission.MissionEvent)
+# the running mission's plan, re-published every few seconds (Zenoh does not latch) for
+# late joiners such as the dashboard; not bulk: a dropped copy is replaced by the next
+MISSION_PLAN = Topic(_k("mission/plan"), plan.PlanResult)
+MISSION_CMD = Rpc[mission.MissionCommand, mission.MissionState](
+    _k("rpc/mission/cmd"), mission.MissionCommand, mission.MissionState
+)
+
+TOPICS: dict[str, type] = {
+    t.key: t.type
+    for t in (
+        HEALTH,
+        SIM_CLOCK,
+        SIM_TRUTH,
+        SIM_ANTENNAS,
+        SIM_WHEELS,
+        SIM_ENCODERS,
+        SIM_LIDAR,
+        GNSS_FIX,
+        GNSS_HEADING,
+        BASE_CMD_VEL,
+        BASE_ODOM,
+        BASE_SCAN,
+        BASE_ESTOP,
+        BASE_STATUS,
+        NAV_POSE,
+        NAV_PROGRESS,
+        SCANNER_STATUS,
+        MISSION_STATE,
+        MISSION_EVENT,
+        MISSION_PLAN,
+    )
+}
+
+RPCS: dict[str, tuple[Any, type]] = {
+    r.key: (r.request, r.reply)
+    for r in (PING, NAV_CMD, SCANNER_CMD, MISSION_CMD, SIM_RENDER, PLANNER_PLAN)
+}

@@ -1,0 +1,60 @@
+"""The mobile base: velocity commands, wheel odometry, 2D lidar, e-stop."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import msgspec
+
+from common.messages.core import Array, Message, NonNegative
+
+# Hard bounds a command must satisfy to be accepted at all; the base's own limits
+# (Husky A200: 1.0 m/s) are applied on top in its config.
+Speed = Annotated[float, msgspec.Meta(ge=-5.0, le=5.0)]
+TurnRate = Annotated[float, msgspec.Meta(ge=-10.0, le=10.0)]
+
+
+class Twist(Message, frozen=True, kw_only=True):
+    """Velocity command in base_link: ``linear_x`` m/s forward, ``angular_z`` rad/s CCW."""
+
+    linear_x: Speed = 0.0
+    angular_z: TurnRate = 0.0
+
+
+class Odometry(Message, frozen=True, kw_only=True):
+    """Wheel odometry: pose of base_link in ``odom`` (metres, radians) and body rates."""
+
+    x: float
+    y: float
+    yaw: float
+    v: float
+    w: float
+    # variances of the increments per metre travelled / per radian turned
+    var_v: NonNegative = 0.0
+    var_w: NonNegative = 0.0
+
+
+class LaserScan(Message, frozen=True, kw_only=True):
+    """A planar scan (sensor_msgs/LaserScan): ``ranges`` float32 metres, inf = no return."""
+
+    angle_min: float
+    angle_max: float
+    angle_increment: float
+    range_min: NonNegative
+    range_max: NonNegative
+    ranges: Array
+
+
+class EStop(Message, frozen=True, kw_only=True):
+    """Emergency stop request: while ``asserted`` the base ignores velocity commands."""
+
+    asserted: bool
+    reason: str = ""
+
+
+class BaseStatus(Message, frozen=True, kw_only=True):
+    """Base driver state, published at the odometry rate."""
+
+    stopped_by_watchdog: bool
+    estop: bool
+    battery_v: float = 0.0

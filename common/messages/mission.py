@@ -1,0 +1,69 @@
+"""The mission supervisor's commands, state and events."""
+
+from __future__ import annotations
+
+import enum
+
+import msgspec
+
+from common.messages.core import FileName, Message
+
+
+class MissionStart(msgspec.Struct, frozen=True, tag=True):
+    """Start a survey: ``plan_file`` (a plan.json path on the mission host) or, when
+    empty, a plan requested from the planner for ``field``."""
+
+    mission: FileName = ""
+    field: str = "engr"
+    plan_file: str = ""
+
+
+class MissionPause(msgspec.Struct, frozen=True, tag=True):
+    pass
+
+
+class MissionResume(msgspec.Struct, frozen=True, tag=True):
+    pass
+
+
+class MissionAbort(msgspec.Struct, frozen=True, tag=True):
+    pass
+
+
+class MissionStatusQuery(msgspec.Struct, frozen=True, tag=True):
+    pass
+
+
+MissionCommand = MissionStart | MissionPause | MissionResume | MissionAbort | MissionStatusQuery
+
+
+class MissionPhase(enum.StrEnum):
+    IDLE = "idle"
+    PLANNING = "planning"
+    DRIVING = "driving"
+    SETTLING = "settling"
+    SCANNING = "scanning"
+    RETURNING = "returning"
+    PAUSED = "paused"
+    DONE = "done"
+    ABORTED = "aborted"
+    FAILED = "failed"
+
+
+class MissionState(Message, frozen=True, kw_only=True):
+    mission: str
+    phase: MissionPhase
+    scans_done: int = 0
+    scans_failed: int = 0
+    scans_total: int = 0
+    current_scan: int = 0
+    distance_m: float = 0.0
+    detail: str = ""
+
+
+class MissionEvent(Message, frozen=True, kw_only=True):
+    """Something the operator should know: ``level`` is info, warning or error."""
+
+    mission: str
+    level: str
+    text: str

@@ -1,0 +1,127 @@
+"""Planner options and results: msgspec Structs, so they decode from TOML, travel over
+the bus and are written as plan.json unchanged. Distances in metres, angles in radians,
+times in seconds, coordinates in the ``field`` frame. Candidate ids follow
+:mod:`common.field`; id 0 stands for the start corner (the paper's "Origin")."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import msgspec
+
+from common.field import FieldLayout, ScannerModel
+from common.messages.core import Array, Message
+from common.messages.nav import Leg
+
+Seconds = Annotated[float, msgspec.Meta(gt=0)]
+
+
+class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """How to plan.
+
+    ``nav``: ``br`` | ``aha`` | ``lanes`` (see :mod:`services.planner.route`; with
+    ``lanes``, ``open_rows``/``open_cross`` list the passable lane indices).
+    ``cover``: ``greedy`` (the paper's Algorithm 1) or ``exact`` (CP-SAT minimum).
+    ``visibility``: ``exact`` (``samples`` x ``samples`` points per exposed cell face)
+    or ``grid`` (the scanner's angular grid, ``grid_step_deg`` overriding its step).
+    ``coverage_target``: fraction of the coverable cells to cover; ``min_hits``: rays
+    (or sample points) a candidate needs on a cell to count as seeing it.
+    ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``.
+    """
+
+    nav: Literal["br", "aha", "lanes"] = "aha"
+    cover: Literal["greedy", "exact"] = "exact"
+    visibility: Literal["exact", "grid"] = "exact"
+    samples: Annotated[int, msgspec.Meta(ge=1, le=16)] = 3
+    grid_step_deg: Annotated[float, msgspec.Meta(gt=0, le=45)] | None = None
+    coverage_target: Annotated[float, msgspec.Meta(gt=0, le=1)] = 1.0
+    min_hits: Annotated[int, msgspec.Meta(ge=1)] = 1
+    cover_time_limit_s: Seconds = 30.0
+    tour: Literal["auto", "held-karp", "cp-sat", "gls"] = "auto"
+    tour_time_limit_s: Seconds = 10.0
+    open_rows: list[int] | None = None
+    open_cross: list[int] | None = None
+
+
+class Candidate(msgspec.Struct, frozen=True, kw_only=True):
+    """A candidate scan location: lane intersection (row-gap lane, cross lane)."""
+
+    id: int
+    x: float
+    y: float
+    row_lane: int
+    cross_lane: int
+    cells_seen: int
+
+
+class CoverSummary(msgspec.Struct, frozen=True, kw_only=True):
+    """``status``: greedy | optimal | feasible | greedy-fallback; ``gap`` is
+    (count - lower bound) / count for CP-SAT (0 when optimal), None for greedy."""
+
+    method: str
+    count: int
+    greedy_count: int
+    cells_total: int
+    cells_coverable: int
+    cells_target: int
+    cells_covered: int
+    status: str
+    bound: float | None
+    gap: float | None
+    time_s: float
+
+
+class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
+    """The closed tour ``order`` (ids, starting and ending at 0) under ``nav``;
+    ``nn_length`` is the nearest-neighbour baseline under the same distances and
+    ``length_by_nav`` the optimal length under each distance model when cheap to get."""
+
+    nav: str
+    order: list[int]
+    length: float
+    method: str
+    status: str
+    nn_length: float
+    nn_order: list[int]
+    length_by_nav: dict[str, float]
+    time_s: float
+
+
+class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
+    mode: str
+    rays: int
+    pairs: int
+    cells_seen_by_none: int
+    median_nearest_range: float
+    time_s: float
+
+
+class PlanResult(Message, frozen=True, kw_only=True):
+    """Everything a survey needs, plus what it took to get it. ``plot_boxes`` is the
+    (P, 6) float64 array of plot boxes; ``origin`` the tour start (x, y)."""
+
+    field: str
+    layout: FieldLayout
+    scanner: ScannerModel
+    options: PlanOptions
+    origin: tuple[float, float]
+    plot_boxes: Array
+    candidates: list[Candidate]
+    selected: list[int]
+    visibility: VisibilitySummary
+    cover: CoverSummary
+    tour: TourSummary
+    legs: list[Leg]
+    timings: dict[str, float]
+
+
+class PlanRequest(Message, frozen=True, kw_only=True):
+    """Ask the planner for a plan. Give the field exactly one way: ``layout`` (layout
+    parameters), ``geojson`` (the text of a FeatureCollection of plot polygons) or
+    ``name`` (an example or a field file on the planner's host)."""
+
+    layout: FieldLayout | None = None
+    geojson: str = ""
+    name: str = ""
+    scanner: ScannerModel = msgspec.field(default_factory=ScannerModel)
+    options: PlanOptions = msgspec.field(default_factory=PlanOptions)

@@ -1,0 +1,269 @@
+"""Typed publish/subscribe/query over one Zenoh session.
+
+Only this module (and the service runner) touch Zenoh's API. Messages are msgpack
+encoded by msgspec, one reused Encoder and one Decoder per type. A message that
+fails to decode is logged once per key with the reason, counted, and dropped: a bad
+peer cannot crash a service.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Generic, TypeVar
+
+import msgspec
+import numpy as np
+import zenoh
+
+from common.keys import Rpc, Topic
+
+M = TypeVar("M")
+Q = TypeVar("Q")
+R = TypeVar("R")
+
+log = logging.getLogger(__name__)
+
+
+def _enc_hook(obj: Any) -> Any:
+    # numpy scalars reach messages from every numeric core; send them as Python numbers
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise NotImplementedError(f"cannot encode objects of type {type(obj).__name__}")
+
+
+_ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
+_DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {}
+_DECODERS_LOCK = threading.Lock()
+
+
+def encode(msg: Any) -> bytes:
+    return _ENCODER.encode(msg)
+
+
+def decode(data: bytes, type_: Any) -> Any:
+    """Decode ``data`` as ``type_``; raises msgspec.DecodeError/ValidationError."""
+    dec = _DECODERS.get(type_)
+    if dec is None:
+        with _DECODERS_LOCK:
+            dec = _DECODERS.setdefault(type_, msgspec.msgpack.Decoder(type_))
+    return dec.decode(data)
+
+
+class RpcError(RuntimeError):
+    """The service answered a query with an error (its text says what was wrong)."""
+
+
+class RpcTimeout(RpcError):
+    """No service answered a query within its timeout."""
+
+
+class RequestError(ValueError):
+    """Raised by an RPC handler to answer with an error reply instead of a result."""
+
+
+class DecodeStats:
+    """Counts of messages dropped because they did not decode, per key."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.by_key: dict[str, int] = {}
+        self.last_error = ""
+
+    @property
+    def total(self) -> int:
+        with self._lock:
+            return sum(self.by_key.values())
+
+    def record(self, key: str, reason: str) -> bool:
+        """Count one failure; True when it is the first on this key (log it then)."""
+        with self._lock:
+            n = self.by_key.get(key, 0)
+            self.by_key[key] = n + 1
+            self.last_error = f"{key}: {reason}"
+            return n == 0
+
+
+class Latest(Generic[M]):
+    """Holds the newest message of a subscription; ``wait_for`` blocks on a predicate."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._value: M | None = None
+        self.count = 0
+
+    def put(self, msg: M) -> None:
+        with self._cond:
+            self._value = msg
+            self.count += 1
+            self._cond.notify_all()
+
+    def get(self) -> M | None:
+        with self._cond:
+            return self._value
+
+    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
+        """The first value (current or future) satisfying ``pred``, or None on timeout."""
+        result: list[M] = []
+
+        def ok() -> bool:
+            v = self._value
+            if v is not None and pred(v):
+                result.append(v)
+                return True
+            return False
+
+        with self._cond:
+            self._cond.wait_for(ok, timeout)
+        return result[0] if result else None
+
+
+class Publisher(Generic[M]):
+    def __init__(self, pub: zenoh.Publisher, topic: Topic[M]) -> None:
+        self._pub = pub
+        self.topic = topic
+
+    def wait_matched(self, timeout: float) -> bool:
+        """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
+        deadline = time.monotonic() + timeout
+        while not self._pub.matching_status.matching:  # type: ignore[attr-defined]
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def put(self, msg: M) -> None:
+        if type(msg) is not self.topic.type:
+            raise TypeError(
+                f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
+            )
+        self._pub.put(_ENCODER.encode(msg))
+
+
+class Bus:
+    """A service's typed view of its Zenoh session.
+
+    Subscription callbacks run on Zenoh's threads: keep them short (store, notify).
+    RPC handlers run on a small thread pool so a slow request does not block others.
+    """
+
+    def __init__(self, session: zenoh.Session, name: str, rpc_workers: int = 4) -> None:
+        self.session = session
+        self.name = name
+        self.decode_stats = DecodeStats()
+        self._handles: list[Any] = []
+        self._pool = ThreadPoolExecutor(max_workers=rpc_workers, thread_name_prefix=f"{name}-rpc")
+
+    def _dropped(self, key: str, exc: Exception) -> None:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if self.decode_stats.record(key, reason):
+            log.warning("dropped undecodable message on %s: %s", key, reason)
+
+    def publisher(self, topic: Topic[M]) -> Publisher[M]:
+        if topic.bulk:
+            cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
+        elif topic.control:
+            cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.REAL_TIME
+        else:
+            cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.DATA
+        pub = self.session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
+        self._handles.append(pub)
+        return Publisher(pub, topic)
+
+    def subscribe(self, topic: Topic[M], callback: Callable[[M], None]) -> None:
+        """Call ``callback`` with each decoded message on ``topic`` (a key or pattern)."""
+        self.subscribe_raw(topic.key, lambda data: decode(data, topic.type), callback)
+
+    def latest(self, topic: Topic[M]) -> Latest[M]:
+        holder: Latest[M] = Latest()
+        self.subscribe(topic, holder.put)
+        return holder
+
+    def serve(self, rpc: Rpc[Q, R], handler: Callable[[Q], R]) -> None:
+        """Answer queries on ``rpc.key`` with ``handler(request)``.
+
+        A request that fails to decode, or a handler raising RequestError, gets an
+        error reply with a one-line reason; other exceptions are logged and answered
+        as internal errors. The service keeps serving either way.
+        """
+
+        def work(query: zenoh.Query) -> None:
+            key = str(query.key_expr)
+            try:
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                try:
+                    req = decode(payload, rpc.request)
+                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                    self._dropped(key, exc)
+                    query.reply_err(f"bad request on {key}: {exc}".encode())
+                    return
+                try:
+                    rep = handler(req)
+                except RequestError as exc:
+                    query.reply_err(f"{exc}".encode())
+                    return
+                except Exception as exc:
+                    log.exception("handler for %s failed", key)
+                    query.reply_err(f"internal error in {self.name}: {exc!r}".encode())
+                    return
+                query.reply(query.key_expr, _ENCODER.encode(rep))
+            finally:
+                query.drop()
+
+        def on_query(query: zenoh.Query) -> None:
+            self._pool.submit(work, query)
+
+        self._handles.append(self.session.declare_queryable(rpc.key, on_query))
+
+    def call(self, rpc: Rpc[Q, R], request: Q, timeout: float = 5.0) -> R:
+        """Send ``request`` and return the first reply.
+
+        Raises RpcError with the service's reason on an error reply, RpcTimeout when
+        nobody answers within ``timeout`` seconds.
+        """
+        replies = self.session.get(rpc.key, payload=_ENCODER.encode(request), timeout=timeout)
+        for reply in replies:
+            if reply.ok is not None:
+                try:
+                    result: R = decode(reply.ok.payload.to_bytes(), rpc.reply)
+                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                    raise RpcError(f"undecodable reply on {rpc.key}: {exc}") from exc
+                return result
+            err = reply.err
+            raise RpcError(err.payload.to_bytes().decode(errors="replace") if err else "error")
+        raise RpcTimeout(f"no reply on {rpc.key} within {timeout:g} s")
+
+    def put_raw(self, key: str, data: bytes) -> None:
+        """Publish raw bytes on a key outside the message table (a ROS 2 bridge's CDR
+        topics), or malformed data in tests."""
+        self.session.put(key, data)
+
+    def subscribe_raw(
+        self, key: str, decoder: Callable[[bytes], M], callback: Callable[[M], None]
+    ) -> None:
+        """Subscribe to a foreign encoding: ``decoder`` raises on bad bytes (any
+        exception), which is logged once, counted and dropped like a bad message."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                msg = decoder(sample.payload.to_bytes())
+            except Exception as exc:
+                self._dropped(key, exc)
+                return
+            try:
+                callback(msg)
+            except Exception:
+                log.exception("subscriber callback for %s failed", key)
+
+        self._handles.append(self.session.declare_subscriber(key, on_sample))
+
+    def close(self) -> None:
+        for h in reversed(self._handles):
+            with contextlib.suppress(zenoh.ZError):
+                h.undeclare()
+        self._handles.clear()
+        self._pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,88 @@
+"""The base service's Zenoh shell: velocity commands in (through the watchdog and the
+e-stop), wheel odometry, lidar and status out."""
+
+from __future__ import annotations
+
+import threading
+
+from common import clock as clk
+from common import keys
+from common.messages.base import BaseStatus, EStop, LaserScan, Odometry, Twist
+from common.service import Context
+from services.base.backends import BACKENDS
+from services.base.config import BaseConfig
+from services.base.drive import CommandGate, OdometryIntegrator
+
+
+class BaseService:
+    def __init__(self, ctx: Context, cfg: BaseConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        self.gate = CommandGate(cfg.max_speed, cfg.max_turn_rate, int(cfg.watchdog_s * 1e9))
+        self.odom = OdometryIntegrator()
+        self._lock = threading.Lock()
+        self.odom_pub = ctx.bus.publisher(keys.BASE_ODOM)
+        self.scan_pub = ctx.bus.publisher(keys.BASE_SCAN)
+        self.status_pub = ctx.bus.publisher(keys.BASE_STATUS)
+        self.drive = BACKENDS[cfg.backend](
+            cfg, ctx.bus, self._on_encoders, self._on_odom, self._on_scan
+        )
+        ctx.bus.subscribe(keys.BASE_CMD_VEL, self._on_cmd)
+        ctx.bus.subscribe(keys.BASE_ESTOP, self._on_estop)
+
+    def _on_cmd(self, t: Twist) -> None:
+        with self._lock:
+            self.gate.command(t.linear_x, t.angular_z, self.ctx.clock.now_ns())
+
+    def _on_estop(self, e: EStop) -> None:
+        with self._lock:
+            if e.asserted != self.gate.estop:
+                self.ctx.log.warning(
+                    "e-stop %s %s", "asserted" if e.asserted else "released", e.reason
+                )
+            self.gate.set_estop(e.asserted, e.reason)
+        if e.asserted:
+            self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
+
+    def _on_encoders(self, stamp_ns: int, v: float, w: float) -> None:
+        with self._lock:
+            self.odom.update(v, w, stamp_ns)
+            x, y, yaw = self.odom.x, self.odom.y, self.odom.yaw
+        self._on_odom(stamp_ns, x, y, yaw, v, w)
+
+    def _on_odom(self, stamp_ns: int, x: float, y: float, yaw: float, v: float, w: float) -> None:
+        self.odom_pub.put(
+            Odometry(
+                stamp_ns=stamp_ns,
+                frame_id="odom",
+                x=x,
+                y=y,
+                yaw=yaw,
+                v=v,
+                w=w,
+                var_v=self.cfg.var_v,
+                var_w=self.cfg.var_w,
+            )
+        )
+
+    def _on_scan(self, scan: LaserScan) -> None:
+        self.scan_pub.put(scan)
+
+    def run(self, stop: threading.Event) -> None:
+        tripped = True
+        for now in clk.ticks(self.ctx.clock, self.cfg.rate_hz, stop):
+            with self._lock:
+                v, w = self.gate.output(now)
+                wd = self.gate.watchdog_tripped(now)
+                estop = self.gate.estop
+            if wd and not tripped and not estop:
+                self.ctx.log.info(
+                    "watchdog: no command for %.1f s, wheels stopped", self.cfg.watchdog_s
+                )
+            tripped = wd
+            self.drive.send(v, w, now)
+            self.status_pub.put(BaseStatus(stamp_ns=now, stopped_by_watchdog=wd, estop=estop))
+        self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
+
+
+def build(ctx: Context, cfg: BaseConfig) -> BaseService:
+    return BaseService(ctx, cfg)

@@ -1,0 +1,1 @@
+"""The gnss service: GNSS receivers (two antennas) and the GNSS compass."""

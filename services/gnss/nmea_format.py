@@ -1,0 +1,98 @@
+"""NMEA 0183 formatting, the inverse of :func:`services.gnss.nmea.parse_sentence`.
+
+The simulated receiver formats its fixes with these so that the sim path runs
+through the same parser as a real receiver. Sentences carry their checksum and end
+in CR/LF; ``None`` fields become empty fields.
+"""
+
+from __future__ import annotations
+
+import math
+
+from services.gnss.nmea import KNOT_MPS, Gga, Gst, Rmc, checksum
+
+
+def _sentence(addr: str, fields: list[str]) -> str:
+    body = ",".join([addr, *fields])
+    return f"${body}*{checksum(body)}\r\n"
+
+
+def _fmt_time(t: float | None) -> str:
+    if t is None:
+        return ""
+    cs = round(t * 100.0) % 8_640_000  # centiseconds, wrapped at midnight
+    h, rem = divmod(cs, 360_000)
+    m, rem = divmod(rem, 6000)
+    return f"{h:02d}{m:02d}{rem // 100:02d}.{rem % 100:02d}"
+
+
+def _fmt_angle(value: float | None, width: int, pos: str, neg: str) -> list[str]:
+    if value is None:
+        return ["", ""]
+    # 8 decimals of a minute is 0.02 mm: quantisation far below RTK noise.
+    total = round(abs(value) * 60.0, 8)
+    deg, minutes = divmod(total, 60.0)
+    return [f"{int(deg):0{width}d}{minutes:011.8f}", pos if value >= 0 else neg]
+
+
+def _fmt(value: float | None, fmt: str) -> str:
+    return "" if value is None or not math.isfinite(value) else format(value, fmt)
+
+
+def format_gga(g: Gga) -> str:
+    """The GGA sentence for ``g``, with checksum and CR/LF."""
+    return _sentence(
+        f"{g.talker}GGA",
+        [
+            _fmt_time(g.time_s),
+            *_fmt_angle(g.lat_deg, 2, "N", "S"),
+            *_fmt_angle(g.lon_deg, 3, "E", "W"),
+            str(int(g.quality)),
+            f"{g.num_sats:02d}",
+            _fmt(g.hdop, ".2f"),
+            _fmt(g.alt_msl_m, ".4f"),
+            "M",
+            _fmt(g.geoid_sep_m, ".4f"),
+            "M",
+            _fmt(g.diff_age_s, ".1f"),
+            "" if g.base_id is None else f"{g.base_id:04d}",
+        ],
+    )
+
+
+def format_rmc(r: Rmc) -> str:
+    """The RMC sentence (NMEA 4.10 form, nav status ``V``) for ``r``."""
+    spd = None if r.speed_mps is None else r.speed_mps / KNOT_MPS
+    return _sentence(
+        f"{r.talker}RMC",
+        [
+            _fmt_time(r.time_s),
+            "A" if r.valid else "V",
+            *_fmt_angle(r.lat_deg, 2, "N", "S"),
+            *_fmt_angle(r.lon_deg, 3, "E", "W"),
+            _fmt(spd, ".4f"),
+            _fmt(r.course_deg, ".3f"),
+            "" if r.date is None else r.date.strftime("%d%m%y"),
+            "",
+            "",
+            r.mode,
+            "V",
+        ],
+    )
+
+
+def format_gst(s: Gst) -> str:
+    """The GST sentence for ``s`` (metres with 4 decimals)."""
+    return _sentence(
+        f"{s.talker}GST",
+        [
+            _fmt_time(s.time_s),
+            _fmt(s.rms_m, ".4f"),
+            _fmt(s.std_major_m, ".4f"),
+            _fmt(s.std_minor_m, ".4f"),
+            _fmt(s.orient_deg, ".2f"),
+            _fmt(s.std_lat_m, ".4f"),
+            _fmt(s.std_lon_m, ".4f"),
+            _fmt(s.std_alt_m, ".4f"),
+        ],
+    )

@@ -1,0 +1,75 @@
+"""The gnss service's Zenoh shell: one reader thread per receiver, fixes and the
+compass heading out on the bus."""
+
+from __future__ import annotations
+
+import threading
+
+from common import keys
+from common.field_geojson import load_frame
+from common.messages.gnss import NavSatFix
+from common.service import Context
+from services.gnss.config import GnssConfig
+from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
+from services.gnss.receiver import Receiver, open_receiver
+from services.gnss.solution import FixBuilder, heading
+
+
+class GnssService:
+    def __init__(self, ctx: Context, cfg: GnssConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        self.frame = load_frame(ctx.field)
+        self.heading_pub = ctx.bus.publisher(keys.GNSS_HEADING)
+        self.fix_pubs = {
+            a.id: ctx.bus.publisher(keys.GNSS_FIX.at(antenna=a.id)) for a in cfg.antennas
+        }
+        self.receivers = [open_receiver(cfg, a, ctx.bus, self.frame) for a in cfg.antennas]
+        self._lock = threading.Lock()
+        self._latest: dict[int, tuple[float, NavSatFix]] = {}
+
+    def _on_fix(self, epoch: float, fix: NavSatFix) -> None:
+        self.fix_pubs[fix.antenna].put(fix)
+        with self._lock:
+            self._latest[fix.antenna] = (epoch, fix)
+            pair = [self._latest.get(1), self._latest.get(2)]
+            if pair[0] is None or pair[1] is None or pair[0][0] != pair[1][0]:
+                return
+            f1, f2 = pair[0][1], pair[1][1]
+            del self._latest[1], self._latest[2]
+        self.heading_pub.put(heading(f1, f2, self.frame, self.cfg.compass))
+
+    def _read(self, rx: Receiver, stop: threading.Event) -> None:
+        splitter = LineSplitter()
+        builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
+        where = f"gnss/{rx.antenna}/nmea"
+        while not stop.is_set():
+            for line in splitter.feed(rx.read(stop)):
+                try:
+                    s = parse_sentence(line)
+                except NmeaError as exc:
+                    if self.ctx.bus.decode_stats.record(where, str(exc)):
+                        self.ctx.log.warning("antenna %d: dropped sentence: %s", rx.antenna, exc)
+                    continue
+                if isinstance(s, Gst):
+                    builder.on_gst(s)
+                elif isinstance(s, Gga) and s.time_s is not None:
+                    fix = builder.on_gga(s, self.ctx.clock.now_ns())
+                    if fix is not None:
+                        self._on_fix(s.time_s, fix)
+
+    def run(self, stop: threading.Event) -> None:
+        threads = [
+            threading.Thread(target=self._read, args=(rx, stop), name=f"gnss{rx.antenna}")
+            for rx in self.receivers
+        ]
+        for t in threads:
+            t.start()
+        stop.wait()
+        for t in threads:
+            t.join(timeout=2.0)
+        for rx in self.receivers:
+            rx.close()
+
+
+def build(ctx: Context, cfg: GnssConfig) -> GnssService:
+    return GnssService(ctx, cfg)

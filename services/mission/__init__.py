@@ -1,0 +1,1 @@
+"""The mission service: the mission supervisor."""

@@ -1,0 +1,100 @@
+"""``phenorover mission start|pause|resume|abort|status`` (typed queries to the mission
+service, from any machine) and ``phenorover sim``: a whole survey in simulation."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from common import keys
+from common.messages.mission import (
+    MissionAbort,
+    MissionCommand,
+    MissionEvent,
+    MissionPause,
+    MissionPhase,
+    MissionResume,
+    MissionStart,
+    MissionState,
+    MissionStatusQuery,
+)
+from common.transport import Bus, RpcError
+
+FINAL = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
+
+
+def add_mission_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("action", choices=["start", "pause", "resume", "abort", "status"])
+    p.add_argument("--field", default="engr")
+    p.add_argument("--plan-file", default="", help="a plan.json on the mission's host")
+    p.add_argument("--name", default="", help="mission name (default: field and time)")
+    p.add_argument("--manifest", type=Path, default=None)
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+
+
+def describe(s: MissionState) -> str:
+    return (
+        f"{s.mission or '-'}: {s.phase.value}, {s.scans_done}/{s.scans_total} scans done, "
+        f"{s.scans_failed} failed, {s.distance_m:.1f} m driven"
+        + (f" ({s.detail})" if s.detail else "")
+    )
+
+
+def cmd_mission(args: argparse.Namespace) -> int:
+    from common.cli import open_client
+
+    commands: dict[str, MissionCommand] = {
+        "start": MissionStart(mission=args.name, field=args.field, plan_file=args.plan_file),
+        "pause": MissionPause(),
+        "resume": MissionResume(),
+        "abort": MissionAbort(),
+        "status": MissionStatusQuery(),
+    }
+    cmd = commands[args.action]
+    with open_client(args.manifest, args.connect) as session:
+        bus = Bus(session, "cli")
+        try:
+            print(describe(bus.call(keys.MISSION_CMD, cmd, timeout=330)))
+        except RpcError as exc:
+            print(f"phenorover mission {args.action}: {exc}", file=sys.stderr)
+            return 1
+        finally:
+            bus.close()
+    return 0
+
+
+def run_survey(bus: Bus, field: str, timeout: float) -> MissionState | None:
+    """Start a survey and print a line per step until it ends; the final state."""
+
+    def on_event(e: MissionEvent) -> None:
+        print(f"  [{e.stamp_ns / 1e9:8.1f} s sim] {e.level}: {e.text}", flush=True)
+
+    bus.subscribe(keys.MISSION_EVENT, on_event)
+    state = bus.latest(keys.MISSION_STATE)
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            s = bus.call(keys.MISSION_CMD, MissionStart(field=field), timeout=330)
+            break
+        except RpcError as exc:
+            if "no reply" not in str(exc) or time.monotonic() > deadline:
+                print(f"phenorover sim: {exc}", file=sys.stderr)
+                return None
+    print(f"mission {s.mission} started", flush=True)
+    last = ""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        st = state.wait_for(lambda x: x.mission == s.mission, timeout=2.0)
+        if st is None:
+            continue
+        line = describe(st)
+        if line != last:
+            print(line, flush=True)
+            last = line
+        if st.phase in FINAL:
+            return st
+        time.sleep(0.5)
+    print(f"phenorover sim: mission not finished after {timeout:.0f} s", file=sys.stderr)
+    return state.get()

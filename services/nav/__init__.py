@@ -1,0 +1,1 @@
+"""The nav service: EKF localization and route following."""

@@ -1,0 +1,45 @@
+from typing import Annotated
+
+import msgspec
+
+from services.nav.ekf import EkfConfig
+from services.nav.follower import FollowerConfig
+
+Pos = Annotated[float, msgspec.Meta(gt=0)]
+
+
+class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """EKF localization and route following.
+
+    ``antenna_levers``: horizontal (x, y) of antennas 1 and 2 in base_link (m), as
+    mounted on the paper's robot (0.95 m baseline along x); ``antenna_height_m``: the
+    antennas' phase centres above base_link (m), for the pose's ``z``. ``fuse_fix_types``: GGA
+    fix types whose positions are fused. RTK-fixed only by default: float errors
+    (decimetres) are correlated over tens of seconds, and fusing them at 10 Hz as if
+    independent makes the filter overconfident enough to reject the fixed solutions
+    that follow; during float the filter dead-reckons on odometry instead. The lidar
+    stop: an obstacle is a return inside the box ``obstacle_distance_m`` ahead of the
+    robot's front and ``obstacle_half_width_m`` to each side (the Husky is 0.67 m
+    wide, and plot edges beside a 0.8 m row gap stand 0.4 m from the lane's centre:
+    0.30 m keeps them 4 sigma of lidar noise plus a few cm of cross-track error out,
+    at the price of missing an obstacle that overlaps only the robot's outer 3.5 cm).
+    ``obstacle_min_points`` returns in ``obstacle_scans`` consecutive scans stop it.
+    ``still_after_s``: how long after the last non-zero velocity command the robot is
+    taken to stand (the drivetrain's lag is 0.15 s), provided its odometry reads
+    still too (within 4 sigma of the encoders' noise); the filter then makes
+    zero-velocity updates.
+    """
+
+    rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 20.0
+    ekf: EkfConfig = msgspec.field(default_factory=EkfConfig)
+    follower: FollowerConfig = msgspec.field(default_factory=FollowerConfig)
+    antenna_levers: tuple[tuple[float, float], tuple[float, float]] = ((-0.475, 0.0), (0.475, 0.0))
+    antenna_height_m: Pos = 1.10
+    fuse_fix_types: list[str] = msgspec.field(default_factory=lambda: ["FIX"])
+    lidar_xy: tuple[float, float] = (0.45, 0.0)
+    robot_front_m: Pos = 0.495
+    obstacle_distance_m: Pos = 0.6
+    obstacle_half_width_m: Pos = 0.30
+    obstacle_min_points: Annotated[int, msgspec.Meta(ge=1)] = 3
+    obstacle_scans: Annotated[int, msgspec.Meta(ge=1)] = 2
+    still_after_s: Pos = 1.0

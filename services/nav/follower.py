@@ -1,0 +1,294 @@
+"""Route following: straight legs tracked by pure pursuit, in-place rotations at the
+corners (paper section 4.3), stops for obstacles and lost localization. Pure: the
+service feeds it poses and times and sends out the velocities it returns.
+
+The end of a route is a scan location, where the scanner's pose is what counts, so
+the last leg ends with a *fine* phase: the robot stands still for a moment (the
+filter averages GNSS while the wheels are still), then creeps along the leg to within
+``fine_tolerance_m`` of the goal and turns slowly to within ``fine_heading_tolerance_deg``
+of the planned heading, re-checking after each move. Creep speeds are low enough that
+the drivetrain's lag overshoots by well under the tolerances.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from typing import Annotated
+
+import msgspec
+
+from common.geo import wrap_angle
+from common.messages.nav import Leg, NavState
+from services.nav.pursuit import along_remaining, cross_track, curvature, lookahead_point
+
+Pos = Annotated[float, msgspec.Meta(gt=0)]
+
+
+class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Look-ahead 1 m as in the paper; speeds within the Husky's limits."""
+
+    lookahead_m: Pos = 1.0
+    # on the route's last leg, toward the scan location: pure pursuit closes a
+    # lateral offset over about one look-ahead of travel, and the corner turn before
+    # it shifts the robot sideways by centimetres
+    final_lookahead_m: Pos = 0.5
+    max_speed: Pos = 0.5
+    max_accel: Pos = 0.5
+    max_turn_rate: Pos = 0.6
+    max_turn_accel: Pos = 1.5
+    rotate_gain: Pos = 1.5
+    min_turn_rate: Pos = 0.04
+    heading_tolerance_deg: Pos = 2.0
+    goal_tolerance_m: Pos = 0.02
+    min_speed: Pos = 0.03
+    obstacle_timeout_s: Pos = 30.0
+    # fine positioning at the route's end (the scan location)
+    fine: bool = True
+    fine_tolerance_m: Pos = 0.003
+    fine_heading_tolerance_deg: Pos = 0.1
+    # stand this long on arrival (the estimate averages the fixes down), and this
+    # long after a creep or trim, which odometry carries without disturbing it
+    fine_settle_s: Pos = 20.0
+    fine_resettle_s: Pos = 2.0
+    creep_speed: Pos = 0.01
+    creep_turn_rate: Pos = 0.005
+    # how long a creep command takes to show in the pose (drivetrain lag plus the
+    # estimate's): the creep stops this much early so it does not overshoot
+    creep_latency_s: Pos = 0.2
+    # at most this many creeps (re-approaches included) and as many heading trims
+    fine_moves: Annotated[int, msgspec.Meta(ge=0)] = 6
+    # a sideways offset cannot be crept away by a skid-steer robot: it backs up along
+    # the leg (at most the leg's length) and comes in again slowly, so that its pose
+    # estimate, settled while standing, is carried by odometry rather than pulled by
+    # each moving fix
+    reapproach_m: Pos = 0.8
+    reapproach_speed: Pos = 0.05
+    reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
+    reapproach_tolerance_m: Pos = 0.004
+
+
+class Phase(enum.Enum):
+    ALIGN = "align"
+    DRIVE = "drive"
+    FINAL = "final"
+    FINE = "fine"
+    BACKUP = "backup"
+
+
+@dataclasses.dataclass
+class Command:
+    v: float
+    w: float
+    state: NavState
+    leg: int
+    distance_to_go: float
+    cross_track: float
+    heading_error: float
+    event: str = ""  # set once when the route ends: arrived, blocked
+    detail: str = ""  # with an event: how it ended, for the log
+
+
+def _leg_len(leg: Leg) -> float:
+    return math.hypot(leg.x1 - leg.x0, leg.y1 - leg.y0)
+
+
+class Follower:
+    def __init__(self, cfg: FollowerConfig) -> None:
+        self.cfg = cfg
+        self.legs: list[Leg] = []
+        self.route_id = ""
+        self.leg = 0
+        self.phase = Phase.ALIGN
+        self.state = NavState.IDLE
+        self._v = 0.0
+        self._w = 0.0
+        self._t: float | None = None
+        self._blocked_since: float | None = None
+        self.speed_limit = cfg.max_speed
+        self._still_since = 0.0
+        self._moves = 0
+        self._creep: tuple[str, float] | None = None  # ("v" | "w", sign) while creeping
+        self._reapproaches = 0
+        self._settle = cfg.fine_settle_s  # how long to stand before the next check
+        self._turns = 0
+        self._backup_to = 0.0  # distance behind the goal a back-up ends at (m)
+
+    def start(self, route_id: str, legs: list[Leg], max_speed: float | None = None) -> None:
+        self.route_id, self.legs, self.leg = route_id, list(legs), 0
+        self.phase = Phase.ALIGN
+        self.state = NavState.DRIVING if legs else NavState.ARRIVED
+        self._moves, self._turns, self._creep, self._reapproaches = 0, 0, None, 0
+        self.speed_limit = min(self.cfg.max_speed, max_speed or self.cfg.max_speed)
+        self._blocked_since = None
+
+    def cancel(self) -> None:
+        if self.state not in (NavState.IDLE, NavState.ARRIVED, NavState.BLOCKED):
+            self.state = NavState.CANCELLED
+
+    @property
+    def active(self) -> bool:
+        return self.state in (
+            NavState.DRIVING,
+            NavState.ROTATING,
+            NavState.POSITIONING,
+            NavState.WAITING_OBSTACLE,
+            NavState.NOT_LOCALIZED,
+        )
+
+    def _ramp(self, target: float, current: float, rate: float, dt: float) -> float:
+        return current + max(-rate * dt, min(rate * dt, target - current))
+
+    def _rotate(self, err: float, dt: float) -> float:
+        c = self.cfg
+        w = max(-c.max_turn_rate, min(c.max_turn_rate, c.rotate_gain * err))
+        if abs(w) < c.min_turn_rate:
+            w = math.copysign(c.min_turn_rate, err)
+        return self._ramp(w, self._w, c.max_turn_accel, dt)
+
+    def _remaining(self, x: float, y: float) -> float:
+        leg = self.legs[self.leg]
+        rest = sum(_leg_len(lg) for lg in self.legs[self.leg + 1 :])
+        return max(0.0, along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)) + rest
+
+    def step(
+        self, t: float, x: float, y: float, yaw: float, localized: bool, obstacle: bool
+    ) -> Command:
+        dt = 0.0 if self._t is None else max(0.0, min(t - self._t, 0.5))
+        self._t = t
+        if not self.active or not self.legs:
+            self._v = self._w = 0.0
+            return Command(0.0, 0.0, self.state, self.leg, 0.0, 0.0, 0.0)
+        leg = self.legs[self.leg]
+        heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
+        xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
+        herr = wrap_angle(yaw - heading)
+        togo = self._remaining(x, y)
+
+        def out(v: float, w: float, state: NavState, event: str = "") -> Command:
+            self._v, self._w, self.state = v, w, state
+            return Command(v, w, state, self.leg, togo, xte, herr, event)
+
+        if not localized:
+            return out(0.0, 0.0, NavState.NOT_LOCALIZED)
+        tol = math.radians(self.cfg.heading_tolerance_deg)
+        if self.phase == Phase.ALIGN:
+            if _leg_len(leg) <= self.cfg.goal_tolerance_m or abs(herr) <= tol:
+                self.phase = Phase.DRIVE
+            else:
+                return out(0.0, self._rotate(-herr, dt), NavState.ROTATING)
+        if self.phase == Phase.BACKUP:
+            if along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1) < self._backup_to:
+                # pure pursuit in reverse: steer the robot's back along the leg
+                u = self.cfg.reapproach_speed
+                px, py = lookahead_point(
+                    x, y, leg.x1, leg.y1, leg.x0, leg.y0, self.cfg.final_lookahead_m
+                )
+                k = curvature(x, y, wrap_angle(yaw + math.pi), px, py)
+                w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, u * k))
+                return out(-u, w, NavState.POSITIONING)
+            self.phase = Phase.DRIVE
+        if self.phase == Phase.DRIVE:
+            rem = along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
+            if rem > self.cfg.goal_tolerance_m:
+                if obstacle:
+                    self._blocked_since = self._blocked_since if self._blocked_since else t
+                    if t - self._blocked_since > self.cfg.obstacle_timeout_s:
+                        return out(0.0, 0.0, NavState.BLOCKED, "blocked")
+                    return out(0.0, 0.0, NavState.WAITING_OBSTACLE)
+                self._blocked_since = None
+                # the look-ahead runs past the leg's end, so the robot stays on the
+                # line to the last centimetre instead of swerving at the goal point
+                last = self.leg + 1 == len(self.legs)
+                la = self.cfg.final_lookahead_m if last else self.cfg.lookahead_m
+                px, py = lookahead_point(x, y, leg.x0, leg.y0, leg.x1, leg.y1, la, beyond=True)
+                k = curvature(x, y, yaw, px, py)
+                # slow down to stop at the leg's end: v^2 = 2 a d
+                v_stop = math.sqrt(2.0 * self.cfg.max_accel * 0.5 * rem)
+                v = min(self.speed_limit, max(self.cfg.min_speed, v_stop))
+                v = self._ramp(v, self._v, self.cfg.max_accel, dt)
+                w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, v * k))
+                # coming in again after backing up is part of the fine positioning
+                return out(v, w, NavState.POSITIONING if self._reapproaches else NavState.DRIVING)
+            last = self.leg + 1 == len(self.legs)
+            self.phase = Phase.FINE if last and self.cfg.fine else Phase.FINAL
+            self._still_since, self._settle = t, self.cfg.fine_settle_s
+        if self.phase == Phase.FINE:
+            # the planned heading; a scan at the start point (zero-length leg, no
+            # final_yaw) has none, and the robot scans as it stands
+            along = _leg_len(leg) > 0
+            goal_yaw = leg.final_yaw if leg.final_yaw is not None else heading if along else yaw
+            ferr = wrap_angle(yaw - goal_yaw)
+            if abs(ferr) > tol and self._creep is None:
+                # a large turn (the leg's heading to another planned one) is done
+                # coarsely first; the fine phase then settles and trims it
+                self._still_since = t
+                return out(0.0, self._rotate(-ferr, dt), NavState.ROTATING)
+            if (
+                along
+                and self._creep is None
+                and t - self._still_since >= self._settle
+                and abs(xte) > self.cfg.reapproach_tolerance_m
+                and abs(herr) <= tol
+                and self._reapproaches < self.cfg.reapproaches
+                and self._moves < self.cfg.fine_moves
+            ):
+                self._reapproaches += 1
+                self._moves += 1
+                self.phase = Phase.BACKUP
+                self._backup_to = min(self.cfg.reapproach_m, _leg_len(leg))
+                self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
+                return out(0.0, 0.0, NavState.POSITIONING)
+            # the robot can only creep along its heading: the goal's offset that way
+            ahead = (leg.x1 - x) * math.cos(yaw) + (leg.y1 - y) * math.sin(yaw)
+            v, w = self._fine(t, ahead, ferr)
+            if v or w or t - self._still_since < self._settle:
+                return out(v, w, NavState.POSITIONING)
+            c = out(0.0, 0.0, NavState.ARRIVED, "arrived")
+            c.detail = (
+                f"{1000 * ahead:+.1f} mm along, {1000 * xte:+.1f} mm across, "
+                f"{math.degrees(ferr):+.2f} deg off the planned pose by the estimate "
+                f"({self._moves} creeps, {self._turns} turns, {self._reapproaches} re-approaches)"
+            )
+            return c
+        # FINAL: rotate in place to the next leg's heading
+        if leg.final_yaw is not None:
+            ferr = wrap_angle(yaw - leg.final_yaw)
+            if abs(ferr) > tol:
+                return out(0.0, self._rotate(-ferr, dt), NavState.ROTATING)
+        if self.leg + 1 < len(self.legs):
+            self.leg += 1
+            self.phase = Phase.ALIGN
+            return out(0.0, 0.0, NavState.DRIVING)
+        return out(0.0, 0.0, NavState.ARRIVED, "arrived")
+
+    def _fine(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
+        """One step of fine positioning at the goal, ``rem`` metres short of it along
+        the robot's heading and ``yaw_err`` off the planned heading: (v, w) to creep
+        with, or (0, 0) to stand (settling, or done)."""
+        c = self.cfg
+        if self._creep is not None:
+            kind, sign = self._creep
+            err = rem if kind == "v" else -yaw_err
+            rate = c.creep_speed if kind == "v" else c.creep_turn_rate
+            # aim at the goal itself, stopping early by what is still in the pipeline
+            if sign * err > rate * c.creep_latency_s:
+                return (sign * rate, 0.0) if kind == "v" else (0.0, sign * rate)
+            self._creep, self._still_since, self._settle = None, t, c.fine_resettle_s
+            return 0.0, 0.0
+        if t - self._still_since < self._settle:
+            return 0.0, 0.0
+        # position and heading each have their own budget of moves: a trim of the
+        # heading is cheap and must not go short because the position took long
+        if abs(rem) > c.fine_tolerance_m and self._moves < c.fine_moves:
+            self._creep = ("v", math.copysign(1.0, rem))
+            self._moves += 1
+        elif (
+            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self._turns < c.fine_moves
+        ):
+            self._creep = ("w", math.copysign(1.0, -yaw_err))
+            self._turns += 1
+        else:
+            return 0.0, 0.0
+        return self._fine(t, rem, yaw_err)

@@ -1,0 +1,272 @@
+"""``phenorover nav-test border|serpentine|stationary``: the paper's navigation
+experiments on the simulated ENGR field, with real processes (sim, base, gnss, nav
+from ``deploy/sim.toml``) and the simulator's default error models. Writes
+``stats.json``, the effective manifest, and figures to the output folder."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+import tomli_w
+
+from common import keys
+from common.config import load_manifest
+from common.field import load_field
+from common.launcher import free_loopback_port
+from common.messages.nav import FollowRoute, Leg, NavProgress, NavState, PoseEstimate
+from common.messages.sim import TruthPose
+from common.transport import Bus, RpcError
+from services.nav import experiments as ex
+
+SERVICES = ("sim", "base", "gnss", "nav")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("experiment", choices=["border", "serpentine", "stationary"])
+    p.add_argument("--manifest", type=Path, default=Path("deploy/sim.toml"))
+    p.add_argument("--rtf", type=float, default=10.0, help="sim real-time factor")
+    p.add_argument("--passes", type=int, default=2, help="serpentine: out-and-back passes")
+    p.add_argument("--hold", type=float, default=420.0, help="stationary: seconds held (sim)")
+    p.add_argument("--out", type=Path, default=None, help="output folder (runs/nav-EXPERIMENT)")
+    p.add_argument("--seed", type=int, default=None, help="the world's and receivers' seed")
+
+
+def _manifest(src: Path, rtf: float, out: Path, seed: int | None = None) -> Path:
+    with src.open("rb") as f:
+        m: dict[str, Any] = tomllib.load(f)
+    m["services"] = {k: v for k, v in m["services"].items() if k in SERVICES}
+    m["services"].setdefault("sim", {})["real_time_factor"] = rtf
+    if seed is not None:  # another draw of terrain, slip and receiver errors
+        m["services"]["sim"]["seed"] = seed
+        m["services"].setdefault("gnss", {})["seed"] = seed + 1
+    # a private router port, so an experiment runs beside a deployment that is up
+    m["zenoh"] = {**m.get("zenoh", {}), "listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]}
+    m["zenoh"].pop("connect", None)
+    path = out / "manifest.toml"
+    path.write_text(tomli_w.dumps(m))
+    return path
+
+
+class Recorder:
+    """Truth, estimates and progress, as they arrive."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.lock = threading.Lock()
+        self.truth: list[tuple[TruthPose, NavProgress | None]] = []
+        self.poses: list[PoseEstimate] = []
+        self.progress: NavProgress | None = None
+        bus.subscribe(keys.SIM_TRUTH, self._truth)
+        bus.subscribe(keys.NAV_POSE, self._pose)
+        bus.subscribe(keys.NAV_PROGRESS, self._progress)
+
+    def _truth(self, t: TruthPose) -> None:
+        with self.lock:
+            self.truth.append((t, self.progress))
+
+    def _pose(self, p: PoseEstimate) -> None:
+        with self.lock:
+            self.poses.append(p)
+
+    def _progress(self, p: NavProgress) -> None:
+        with self.lock:
+            self.progress = p
+
+
+def _follow(bus: Bus, rec: Recorder, legs: list[Leg], route_id: str, timeout: float) -> NavState:
+    deadline = time.monotonic() + 15
+    while True:
+        try:
+            bus.call(keys.NAV_CMD, FollowRoute(route_id=route_id, legs=legs), timeout=2)
+            break
+        except RpcError:
+            if time.monotonic() > deadline:
+                raise
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        p = rec.progress
+        if (
+            p is not None
+            and p.route_id == route_id
+            and p.state in (NavState.ARRIVED, NavState.BLOCKED)
+        ):
+            return p.state
+        time.sleep(0.2)
+    raise TimeoutError(f"route {route_id} not finished within {timeout:.0f} s")
+
+
+def _figures(
+    out: Path,
+    xy: np.ndarray,
+    xte: np.ndarray,
+    t: np.ndarray,
+    herr: np.ndarray,
+    legs: list[Leg],
+    title: str,
+) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(13, 5))
+    for lg in legs:
+        ax[0].plot([lg.x0, lg.x1], [lg.y0, lg.y1], color="0.75", lw=3, zorder=1)
+    sc = ax[0].scatter(
+        xy[:, 0], xy[:, 1], c=100 * np.abs(xte), s=4, cmap="viridis", vmin=0, vmax=10, zorder=2
+    )
+    fig.colorbar(sc, ax=ax[0], label="|cross-track error| (cm)")
+    ax[0].set(aspect="equal", xlabel="x (m)", ylabel="y (m)", title=f"{title}: true path")
+    ax[1].plot(t, np.degrees(herr), lw=0.8)
+    ax[1].set(xlabel="sim time (s)", ylabel="heading error (deg)", title="heading error")
+    fig.tight_layout()
+    fig.savefig(out / f"{title}.png", dpi=120)
+    plt.close(fig)
+
+
+def run(args: argparse.Namespace) -> int:
+    from common.cli import open_client, wait_alive
+    from common.launcher import Launcher
+
+    out = args.out or Path("runs") / f"nav-{args.experiment}"
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _manifest(args.manifest, args.rtf, out, args.seed)
+    launcher = Launcher(manifest)
+    with launcher, open_client(manifest, []) as session:
+        bus = Bus(session, "nav-test")
+        try:
+            if not wait_alive(session, set(SERVICES), timeout=60):
+                print("nav-test: services did not come up", file=sys.stderr)
+                return 1
+            rec = Recorder(bus)
+            t0 = time.monotonic()
+            while not (rec.poses and rec.poses[-1].localized):
+                if time.monotonic() - t0 > 120:
+                    print("nav-test: never localized", file=sys.stderr)
+                    return 1
+                time.sleep(0.2)
+            stats = _experiment(args, bus, rec, out)
+        finally:
+            bus.close()
+    stats["error_models"] = "see README 'Error models' (simulator defaults, not weakened)"
+    (out / "stats.json").write_text(json.dumps(stats, indent=1))
+    print(json.dumps(stats, indent=1))
+    return 0
+
+
+def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) -> dict[str, Any]:
+    _, fld = load_field(load_manifest(args.manifest).field)
+    if args.experiment == "stationary":
+        return _stationary(args, bus, rec, out, fld)
+    pts = (
+        ex.border_points(fld)
+        if args.experiment == "border"
+        else ex.serpentine_points(fld, args.passes)
+    )
+    legs = ex.legs_through(pts)
+    length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
+    state = _follow(bus, rec, legs, args.experiment, timeout=60 + 10 * length / args.rtf)
+    with rec.lock:
+        rows = [
+            (t, p)
+            for t, p in rec.truth
+            if p is not None and p.route_id == args.experiment and p.state == NavState.DRIVING
+        ]
+    xy = np.array([[t.x, t.y] for t, _ in rows])
+    yaw = np.array([t.yaw for t, _ in rows])
+    legi = np.array([p.leg for _, p in rows], dtype=np.int64)
+    ts = np.array([t.stamp_ns / 1e9 for t, _ in rows])
+    xte, herr = ex.track_errors(xy, yaw, legi, legs)
+    _figures(out, xy, xte, ts, herr, legs, args.experiment)
+    return {
+        "experiment": args.experiment,
+        "result": state.value,
+        "route_m": length,
+        **ex.track_stats(xte, herr),
+    }
+
+
+def _stationary(
+    args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path, fld: Any
+) -> dict[str, Any]:
+    ox, oy = float(fld.origin_xy[0]), float(fld.origin_xy[1])
+    goal = (float(fld.cross_lanes_x[-2]), float(fld.row_lanes_y[1]))
+    goal_yaw = math.atan2(goal[1] - oy, 0.0)
+    legs = ex.legs_through([(ox, oy), (goal[0], oy), goal])
+    # a scan location is held at a planned heading, as the mission's legs end
+    legs[-1] = msgspec.structs.replace(legs[-1], final_yaw=goal_yaw)
+    _follow(bus, rec, legs, "stationary", timeout=600)
+    with rec.lock:
+        n_pose, n_truth = len(rec.poses), len(rec.truth)
+    t_start = rec.poses[-1].stamp_ns
+    while (rec.poses[-1].stamp_ns - t_start) / 1e9 < args.hold:
+        time.sleep(0.5)
+    with rec.lock:
+        poses = rec.poses[n_pose:]
+        truths = [t for t, _ in rec.truth[n_truth:]]
+    g = (goal[0], goal[1], goal_yaw)
+    est = ex.stationary_stats(
+        np.array([[p.x, p.y] for p in poses]), np.array([p.yaw for p in poses]), g
+    )
+    tru = ex.stationary_stats(
+        np.array([[t.x, t.y] for t in truths]), np.array([t.yaw for t in truths]), g
+    )
+    _stationary_figure(out, poses, g)
+    z_est = float(np.mean([p.z for p in poses]))
+    z_true = float(np.mean([t.z for t in truths]))
+    return {
+        "experiment": "stationary",
+        "hold_s": args.hold,
+        "goal": list(g),
+        "estimate": {
+            **est,
+            "z_mean_m": z_est,
+            "z_sd_cm": float(100 * np.std([p.z for p in poses])),
+        },
+        "truth": {**tru, "z_mean_m": z_true},
+        # where the estimate sits against the truth: what a scan's placement inherits
+        "estimate_error_cm": {
+            "x": float(100 * (np.mean([p.x for p in poses]) - np.mean([t.x for t in truths]))),
+            "y": float(100 * (np.mean([p.y for p in poses]) - np.mean([t.y for t in truths]))),
+            "z": 100 * (z_est - z_true),
+        },
+    }
+
+
+def _stationary_figure(out: Path, poses: list[PoseEstimate], g: tuple[float, float, float]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.array([p.stamp_ns / 1e9 for p in poses])
+    t -= t[0]
+    fig, ax = plt.subplots(4, 1, figsize=(8, 8), sharex=True)
+    series = [
+        (100 * (np.array([p.x for p in poses]) - g[0]), "x - planned (cm)"),
+        (100 * (np.array([p.y for p in poses]) - g[1]), "y - planned (cm)"),
+        (
+            np.degrees([math.remainder(p.yaw - g[2], 2 * math.pi) for p in poses]),
+            "heading error (deg)",
+        ),
+        (
+            100 * np.hypot([p.x - g[0] for p in poses], [p.y - g[1] for p in poses]),
+            "distance to planned (cm)",
+        ),
+    ]
+    for a, (y, label) in zip(ax, series, strict=True):
+        a.plot(t, y, lw=0.8)
+        a.set_ylabel(label)
+    ax[-1].set_xlabel("time at the scan location (s)")
+    fig.tight_layout()
+    fig.savefig(out / "stationary.png", dpi=120)
+    plt.close(fig)

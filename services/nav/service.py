@@ -1,0 +1,184 @@
+"""The nav service's Zenoh shell: localization from odometry, fixes and heading;
+route following from ``rpc/nav/cmd``; pose, progress and velocity commands out."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from common import clock as clk
+from common import keys
+from common.field_geojson import load_frame
+from common.messages.base import LaserScan, Odometry, Twist
+from common.messages.gnss import GnssHeading, NavSatFix
+from common.messages.nav import (
+    CancelRoute,
+    FollowRoute,
+    NavCommand,
+    NavProgress,
+    NavReply,
+    NavState,
+    PoseEstimate,
+)
+from common.service import Context
+from services.nav.config import NavConfig
+from services.nav.ekf import Localizer
+from services.nav.follower import Follower
+from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
+
+
+class NavService:
+    def __init__(self, ctx: Context, cfg: NavConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        self.frame = load_frame(ctx.field)
+        self.loc = Localizer(cfg.ekf)
+        self.follower = Follower(cfg.follower)
+        self._lock = threading.Lock()
+        self._obstacle = False
+        self._obstacle_run = 0  # consecutive scans with an obstacle in the box
+        self._moving_until = 0.0  # time of the last non-zero velocity command (s)
+        bus = ctx.bus
+        self.pose_pub = bus.publisher(keys.NAV_POSE)
+        self.progress_pub = bus.publisher(keys.NAV_PROGRESS)
+        self.cmd_pub = bus.publisher(keys.BASE_CMD_VEL)
+        bus.subscribe(keys.BASE_ODOM, self._on_odom)
+        for antenna in (1, 2):
+            bus.subscribe(keys.GNSS_FIX.at(antenna=antenna), self._on_fix)
+        bus.subscribe(keys.GNSS_HEADING, self._on_heading)
+        bus.subscribe(keys.BASE_SCAN, self._on_scan)
+        bus.serve(keys.NAV_CMD, self.handle)
+
+    def _on_odom(self, m: Odometry) -> None:
+        t = m.stamp_ns / 1e9
+        with self._lock:
+            # standing: nothing commanded for a while and the encoders agree (so a
+            # robot pushed or driven by someone else is never taken to stand)
+            still = (
+                t - self._moving_until >= self.cfg.still_after_s
+                and m.v * m.v <= 16.0 * max(m.var_v, 1e-12)
+                and m.w * m.w <= 16.0 * max(m.var_w, 1e-12)
+            )
+            self.loc.update_odometry(t, m.v, m.w, m.var_v, m.var_w, still=still)
+
+    def _on_fix(self, m: NavSatFix) -> None:
+        if m.fix_type.name not in self.cfg.fuse_fix_types:
+            return
+        x, y, z = self.frame.wgs84_to_field(m.latitude, m.longitude, m.altitude)
+        cov3 = self.frame.enu_cov_to_field(m.position_covariance)
+        lever = self.cfg.antenna_levers[m.antenna - 1]
+        t = m.stamp_ns / 1e9
+        with self._lock:
+            self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever)
+            # the antennas sit symmetrically about base_link, so their mean height less
+            # the mast is base_link's on a pitched robot too (to 1 - cos(tilt))
+            self.loc.update_height(t, float(z) - self.cfg.antenna_height_m, float(cov3[2, 2]))
+
+    def _on_heading(self, m: GnssHeading) -> None:
+        if m.valid:
+            with self._lock:
+                self.loc.update_heading(m.stamp_ns / 1e9, m.yaw, m.yaw_sd)
+
+    def _on_scan(self, m: LaserScan) -> None:
+        c = self.cfg
+        with self._lock:
+            x = self.loc.x
+            f = self.follower
+            leg = f.legs[f.leg] if f.active and f.legs else None
+        pose = (float(x[0]), float(x[1]), float(x[2]))
+        ranges = m.ranges.numpy()
+        if leg is not None:
+            hit = obstacle_on_leg(
+                ranges,
+                m.angle_min,
+                m.angle_increment,
+                c.lidar_xy,
+                pose,
+                (leg.x0, leg.y0, leg.x1, leg.y1),
+                c.robot_front_m,
+                c.obstacle_distance_m,
+                c.obstacle_half_width_m,
+                c.obstacle_min_points,
+            )
+        else:
+            hit = obstacle_ahead(
+                ranges,
+                m.angle_min,
+                m.angle_increment,
+                c.lidar_xy,
+                c.robot_front_m,
+                c.obstacle_distance_m,
+                c.obstacle_half_width_m,
+                c.obstacle_min_points,
+            )
+        self._obstacle_run = self._obstacle_run + 1 if hit else 0
+        self._obstacle = self._obstacle_run >= c.obstacle_scans
+
+    def handle(self, cmd: NavCommand) -> NavReply:
+        now = self.ctx.clock.now_ns()
+        with self._lock:
+            match cmd:
+                case FollowRoute(route_id=rid, legs=legs, max_speed=vmax):
+                    self.follower.start(rid, legs, vmax)
+                    self.ctx.log.info("route %s: %d legs", rid, len(legs))
+                case CancelRoute():
+                    self.follower.cancel()
+                    self.ctx.log.info("route %s cancelled", self.follower.route_id)
+        return NavReply(stamp_ns=now, accepted=True)
+
+    def run(self, stop: threading.Event) -> None:
+        was_active = False
+        for now in clk.ticks(self.ctx.clock, self.cfg.rate_hz, stop):
+            t = now / 1e9
+            with self._lock:
+                self.loc.predict(t)
+                x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
+                localized = self.loc.localized()
+                cmd = self.follower.step(t, x[0], x[1], x[2], localized, self._obstacle)
+                active = self.follower.active
+                if cmd.v or cmd.w:
+                    self._moving_until = t
+                route_id, legs = self.follower.route_id, len(self.follower.legs)
+            self.pose_pub.put(
+                PoseEstimate(
+                    stamp_ns=now,
+                    frame_id="field",
+                    x=x[0],
+                    y=x[1],
+                    yaw=x[2],
+                    z=self.loc.z if math.isfinite(self.loc.var_z) else 0.0,
+                    v=x[3],
+                    w=x[4],
+                    covariance=tuple(cov.ravel()),
+                    localized=localized,
+                )
+            )
+            if active or was_active:
+                self.cmd_pub.put(
+                    Twist(stamp_ns=now, frame_id="base_link", linear_x=cmd.v, angular_z=cmd.w)
+                )
+            was_active = active
+            if route_id:
+                self.progress_pub.put(
+                    NavProgress(
+                        stamp_ns=now,
+                        frame_id="field",
+                        route_id=route_id,
+                        state=cmd.state,
+                        leg=cmd.leg,
+                        legs=legs,
+                        distance_to_go=cmd.distance_to_go,
+                        cross_track=cmd.cross_track,
+                        heading_error=cmd.heading_error,
+                    )
+                )
+            if cmd.event:
+                level = "warning" if cmd.state == NavState.BLOCKED else "info"
+                getattr(self.ctx.log, level)(
+                    "route %s: %s%s", route_id, cmd.event, f": {cmd.detail}" if cmd.detail else ""
+                )
+
+
+def build(ctx: Context, cfg: NavConfig) -> NavService:
+    return NavService(ctx, cfg)

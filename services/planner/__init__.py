@@ -1,0 +1,1 @@
+"""The planner service: scan-location and route planning, locally and as a remote query."""

@@ -1,0 +1,130 @@
+"""``phenorover plan FIELD``: plan locally (or ask the planner service with
+``--remote``), print a summary, write plan.json, plan.geojson, waypoints.csv and
+plan.png."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import TextIO
+
+from common.field import FieldError, ScannerModel
+from common.messages.plan import PlanOptions, PlanResult
+from services.planner.outputs import write_all
+from services.planner.request import request_from_source
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("field", help="example name (engr, spl) or a .toml/.geojson field file")
+    p.add_argument("--nav", choices=["br", "aha", "lanes"], default="aha")
+    p.add_argument("--cover", choices=["greedy", "exact"], default="exact")
+    p.add_argument("--visibility", choices=["exact", "grid"], default="exact")
+    p.add_argument("--grid-step", type=float, default=None, metavar="DEG")
+    p.add_argument("--coverage", type=float, default=1.0, help="fraction of coverable cells")
+    p.add_argument("--min-hits", type=int, default=1)
+    p.add_argument("--tour", choices=["auto", "held-karp", "cp-sat", "gls"], default="auto")
+    p.add_argument("--out", type=Path, default=None, help="output folder (runs/plan-FIELD)")
+    p.add_argument("--remote", action="store_true", help="ask the planner service")
+    p.add_argument("--manifest", type=Path, default=None)
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+    p.add_argument("--timeout", type=float, default=300.0)
+
+
+class ProgressBar:
+    """A one-line progress bar on a terminal (plain lines elsewhere)."""
+
+    def __init__(self, label: str, stream: TextIO = sys.stderr) -> None:
+        self.label, self.stream = label, stream
+        self.t0 = time.monotonic()
+        self._last = -1
+
+    def __call__(self, done: int, total: int) -> None:
+        pct = int(100 * done / max(total, 1))
+        if pct == self._last:
+            return
+        self._last = pct
+        bar = "#" * (pct // 4) + "." * (25 - pct // 4)
+        end = "\n" if done >= total else ""
+        if self.stream.isatty():
+            self.stream.write(
+                f"\r{self.label} [{bar}] {pct:3d}% {time.monotonic() - self.t0:5.1f} s{end}"
+            )
+        elif pct % 25 == 0:
+            self.stream.write(f"{self.label}: {pct}%\n")
+        self.stream.flush()
+
+
+def summary(r: PlanResult) -> str:
+    c, t, v = r.cover, r.tour, r.visibility
+    rows = [
+        ("field", f"{r.field}: {len(r.candidates)} candidate locations"),
+        (
+            "cells",
+            f"{c.cells_total} total, {c.cells_coverable} coverable, {c.cells_covered} covered",
+        ),
+        ("visibility", f"{v.mode}: {v.rays:,} rays, {v.pairs:,} visible pairs, {v.time_s:.3f} s"),
+        ("locations", f"{c.count} ({c.method}, {c.status}); greedy {c.greedy_count}"),
+        (
+            "tour",
+            f"{t.nav.upper()} {t.length:.1f} m ({t.method}, {t.status}); "
+            f"nearest neighbour {t.nn_length:.1f} m",
+        ),
+        ("order", "-".join("Origin" if i == 0 else str(i) for i in t.order)),
+        ("legs", f"{len(r.legs)} straight legs"),
+    ]
+    if t.length_by_nav:
+        rows.append(
+            (
+                "optimum by nav",
+                ", ".join(f"{k.upper()} {v:.1f} m" for k, v in t.length_by_nav.items()),
+            )
+        )
+    rows.append(("timings", ", ".join(f"{k} {v:.3f} s" for k, v in r.timings.items())))
+    w = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    opts = PlanOptions(
+        nav=args.nav,
+        cover=args.cover,
+        visibility=args.visibility,
+        grid_step_deg=args.grid_step,
+        coverage_target=args.coverage,
+        min_hits=args.min_hits,
+        tour=args.tour,
+    )
+    try:
+        req = request_from_source(args.field, ScannerModel(), opts, inline=args.remote)
+    except FieldError as exc:
+        print(f"phenorover plan: {exc}", file=sys.stderr)
+        return 2
+    if args.remote:
+        from common.cli import open_client
+        from common.keys import PLANNER_PLAN
+        from common.transport import Bus, RpcError
+
+        with open_client(args.manifest, args.connect) as session:
+            bus = Bus(session, "cli")
+            try:
+                result = bus.call(PLANNER_PLAN, req, timeout=args.timeout)
+            except RpcError as exc:
+                print(f"phenorover plan: {exc}", file=sys.stderr)
+                return 1
+            finally:
+                bus.close()
+    else:
+        from services.planner.request import compute
+
+        try:
+            result = compute(req, progress=ProgressBar("visibility"))
+        except (FieldError, ValueError) as exc:
+            print(f"phenorover plan: {exc}", file=sys.stderr)
+            return 2
+    print(summary(result))
+    out = args.out or Path("runs") / f"plan-{result.field}"
+    files = write_all(result, out)
+    print("wrote " + ", ".join(str(p) for p in files.values()))
+    return 0

@@ -1,0 +1,159 @@
+"""The planning pipeline: field -> visibility -> set cover -> tour -> legs. Pure: no
+I/O beyond logging; every stage is timed."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from common.field import Field, FieldLayout, ScannerModel, build_field
+from common.messages.core import Array
+from common.messages.plan import (
+    Candidate,
+    CoverSummary,
+    PlanOptions,
+    PlanResult,
+    TourSummary,
+    VisibilitySummary,
+)
+from services.planner.cover import Cover, exact_cover, greedy_cover
+from services.planner.route import NAV_MODES, Navigator
+from services.planner.tsp import HELD_KARP_MAX, held_karp, nearest_neighbour, solve_tour
+from services.planner.visibility import Progress, compute_visibility
+from services.planner.waypoints import tour_legs
+
+log = logging.getLogger(__name__)
+
+
+def _cover_summary(c: Cover, method: str, greedy_count: int) -> CoverSummary:
+    return CoverSummary(
+        method=method,
+        count=len(c.selected),
+        greedy_count=greedy_count,
+        cells_total=c.cells_total,
+        cells_coverable=c.cells_coverable,
+        cells_target=c.cells_target,
+        cells_covered=c.cells_covered,
+        status=c.status,
+        bound=None if np.isnan(c.bound) else c.bound,
+        gap=None if np.isnan(c.gap) else c.gap,
+        time_s=c.time_s,
+    )
+
+
+def plan(
+    layout: FieldLayout,
+    scanner: ScannerModel | None = None,
+    options: PlanOptions | None = None,
+    *,
+    field: Field | None = None,
+    progress: Progress | None = None,
+) -> PlanResult:
+    """Plan a survey of ``layout`` (or of ``field`` when given, e.g. one loaded from
+    GeoJSON). ``progress(done, total)`` follows the visibility stage. Raises ValueError
+    on inconsistent options (such as a lane index outside the field)."""
+    scanner = scanner or ScannerModel()
+    opt = options or PlanOptions()
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    fld = field if field is not None else build_field(layout)
+    nav = Navigator(fld, opt.nav, opt.open_rows, opt.open_cross)
+    timings["field"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    vis = compute_visibility(
+        fld,
+        scanner,
+        opt.visibility,
+        samples=opt.samples,
+        step_deg=opt.grid_step_deg,
+        progress=progress,
+    )
+    timings["visibility"] = time.perf_counter() - t
+    mat = vis.matrix(opt.min_hits)
+    seen = np.asarray(mat.sum(axis=1)).ravel()
+    views = np.asarray(mat.sum(axis=0)).ravel()
+    near = vis.cell_min_range()
+    vsum = VisibilitySummary(
+        mode=vis.mode,
+        rays=vis.rays,
+        pairs=int(mat.nnz),
+        cells_seen_by_none=int((views == 0).sum()),
+        median_nearest_range=float(np.median(near[np.isfinite(near)])) if mat.nnz else 0.0,
+        time_s=timings["visibility"],
+    )
+
+    t = time.perf_counter()
+    greedy = greedy_cover(mat, opt.coverage_target)
+    if opt.cover == "exact":
+        cover = exact_cover(
+            mat, opt.coverage_target, time_limit_s=opt.cover_time_limit_s, hint=greedy
+        )
+    else:
+        cover = greedy
+    timings["cover"] = time.perf_counter() - t
+    log.info(
+        "cover: %d locations (%s), greedy %d",
+        len(cover.selected),
+        cover.status,
+        len(greedy.selected),
+    )
+
+    t = time.perf_counter()
+    sel = list(cover.selected)
+    pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[sel]])
+    ids: list[int | None] = [None, *(int(fld.cand_ids[j]) for j in sel)]
+    dist = nav.distances(pts)
+    tour = solve_tour(dist, opt.tour, opt.tour_time_limit_s)
+    nn = nearest_neighbour(dist)
+    by_nav: dict[str, float] = {}
+    if len(pts) <= HELD_KARP_MAX:
+        for mode in NAV_MODES:
+            other = nav if mode == opt.nav else Navigator(fld, mode, opt.open_rows, opt.open_cross)
+            by_nav[mode] = held_karp(other.distances(pts)).length
+    timings["tour"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    legs = tour_legs(nav, pts, tour.order, ids)
+    timings["legs"] = time.perf_counter() - t
+
+    def as_ids(order: list[int]) -> list[int]:
+        return [0 if k == 0 else int(ids[k] or 0) for k in order] + [0]
+
+    return PlanResult(
+        field=fld.name,
+        layout=layout,
+        scanner=scanner,
+        options=opt,
+        origin=(float(fld.origin_xy[0]), float(fld.origin_xy[1])),
+        plot_boxes=Array.of(fld.plot_boxes),
+        candidates=[
+            Candidate(
+                id=int(fld.cand_ids[j]),
+                x=float(fld.cand_xy[j, 0]),
+                y=float(fld.cand_xy[j, 1]),
+                row_lane=int(fld.cand_row_lane[j]),
+                cross_lane=int(fld.cand_cross_lane[j]),
+                cells_seen=int(seen[j]),
+            )
+            for j in range(fld.n_candidates)
+        ],
+        selected=[int(fld.cand_ids[j]) for j in sel],
+        visibility=vsum,
+        cover=_cover_summary(cover, opt.cover, len(greedy.selected)),
+        tour=TourSummary(
+            nav=opt.nav,
+            order=as_ids(tour.order),
+            length=tour.length,
+            method=tour.method,
+            status=tour.status,
+            nn_length=nn.length,
+            nn_order=as_ids(nn.order),
+            length_by_nav=by_nav,
+            time_s=timings["tour"],
+        ),
+        legs=legs,
+        timings=timings,
+    )

@@ -1,0 +1,571 @@
+"""Exact (resolution-free) visibility kernels.
+
+For each candidate and each exposed cell face, ``samples x samples`` points of the face
+are tested: a point counts when the straight line from the optical centre meets nothing
+before it, within the range limits and the field of view.
+
+When every plot stands on the ground and reaches the optical centre (plants taller than
+the scanner, the paper's case), occlusion is planar: a line of sight is blocked exactly
+when its ground projection crosses a plot at least as tall as both ends. The kernels
+then skip plots and sides that one box hides, and decide a whole column of sample points
+with one horizontal ray; the table is identical to testing every point in 3D (a test
+checks that), at a fraction of the rays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+import numpy.typing as npt
+
+from common.field import Field
+from services.planner.raycast import _slab, cell_of, first_hit
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _seg_hits(b: int, ox: float, oy: float, cx: float, cy: float, boxes: F64) -> bool:
+    """Whether the segment from o to just short of c crosses box b's footprint."""
+    dx, dy = cx - ox, cy - oy
+    a0, a1 = _slab(boxes[b, 0], boxes[b, 3], ox, 1.0 / dx, dx)
+    b0, b1 = _slab(boxes[b, 1], boxes[b, 4], oy, 1.0 / dy, dy)
+    return max(a0, b0, 0.0) <= min(a1, b1, 1.0 - 1e-9)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _plot_hidden(
+    o: F64,
+    p: int,
+    last: int,
+    boxes: F64,
+    x0: float,
+    y0: float,
+    bx: float,
+    by: float,
+    nx: int,
+    ny: int,
+    start: I64,
+    items: I64,
+    zmax: float,
+) -> int:
+    """Box that hides all of plot p under planar occlusion, or -1.
+
+    The lines of sight to the two silhouette corners of p's footprint must both cross
+    the same box B, at least as tall as p; B, convex and disjoint from p, then cuts the
+    whole wedge in front of p. ``last`` (the previous blocker) is tried first without
+    casting, since far plots tend to hide behind the same near one.
+    """
+    cx = 0.5 * (boxes[p, 0] + boxes[p, 3]) - o[0]
+    cy = 0.5 * (boxes[p, 1] + boxes[p, 4]) - o[1]
+    lo, hi = math.inf, -math.inf
+    k_lo, k_hi = 0, 0
+    for k in range(4):
+        vx = boxes[p, 0 if k < 2 else 3] - o[0]
+        vy = boxes[p, 1 if k % 2 == 0 else 4] - o[1]
+        ang = math.atan2(cx * vy - cy * vx, cx * vx + cy * vy)
+        if ang < lo:
+            lo, k_lo = ang, k
+        if ang > hi:
+            hi, k_hi = ang, k
+    if hi - lo >= math.pi:
+        return -1  # o is inside or on the footprint
+    ex = (boxes[p, 0 if k_lo < 2 else 3], boxes[p, 0 if k_hi < 2 else 3])
+    ey = (boxes[p, 1 if k_lo % 2 == 0 else 4], boxes[p, 1 if k_hi % 2 == 0 else 4])
+    if (
+        last >= 0
+        and last != p
+        and boxes[last, 5] >= boxes[p, 5]
+        and _seg_hits(last, o[0], o[1], ex[0], ey[0], boxes)
+        and _seg_hits(last, o[0], o[1], ex[1], ey[1], boxes)
+    ):
+        return last
+    hit = -1
+    for e in range(2):
+        dx, dy = ex[e] - o[0], ey[e] - o[1]
+        d = math.sqrt(dx * dx + dy * dy)
+        b, _ = first_hit(
+            o[0],
+            o[1],
+            o[2],
+            dx / d,
+            dy / d,
+            0.0,
+            d * (1.0 - 1e-9) - 1e-7,
+            boxes,
+            x0,
+            y0,
+            bx,
+            by,
+            nx,
+            ny,
+            start,
+            items,
+            zmax,
+        )
+        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
+            return -1
+        hit = b
+    return hit
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _side_hidden(
+    o: F64,
+    p: int,
+    ax: int,
+    plane: float,
+    boxes: F64,
+    x0: float,
+    y0: float,
+    bx: float,
+    by: float,
+    nx: int,
+    ny: int,
+    start: I64,
+    items: I64,
+    zmax: float,
+) -> bool:
+    """Whether one box hides the whole vertical side ``ax``/``plane`` of plot ``p``.
+
+    Valid only when every box stands on the ground and reaches the scanner height: then
+    occlusion is planar, and if the horizontal rays to both ends of the side hit the same
+    (convex) box B first, B cuts every line of sight to the side; B must also be at
+    least as tall as the plot so lines of sight to its top are cut too.
+    """
+    hit = -1
+    for e in range(2):
+        if ax == 0:
+            ex, ey = plane, boxes[p, 1 + 3 * e]
+        else:
+            ex, ey = boxes[p, 3 * e], plane
+        dx, dy = ex - o[0], ey - o[1]
+        d = math.sqrt(dx * dx + dy * dy)
+        if d < 1e-9:
+            return False
+        b, _ = first_hit(
+            o[0],
+            o[1],
+            o[2],
+            dx / d,
+            dy / d,
+            0.0,
+            d * (1.0 - 1e-9) - 1e-7,
+            boxes,
+            x0,
+            y0,
+            bx,
+            by,
+            nx,
+            ny,
+            start,
+            items,
+            zmax,
+        )
+        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
+            return False
+        hit = b
+    return True
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _sample(
+    a: int,
+    o: F64,
+    p: int,
+    f: int,
+    ax: int,
+    su: int,
+    sv: int,
+    samples: int,
+    rmin: float,
+    rmax: float,
+    vmin: float,
+    vmax: float,
+    hmin: float,
+    hspan: float,
+    known: int,
+    faces: F64,
+    fint: I64,
+    boxes: F64,
+    x0: float,
+    y0: float,
+    bx: float,
+    by: float,
+    nx: int,
+    ny: int,
+    start: I64,
+    items: I64,
+    zmax: float,
+    dims: I64,
+    offset: I64,
+    counts: npt.NDArray[np.int32],
+    rng: npt.NDArray[np.float32],
+) -> int:
+    """Test sample (su, sv) of face f from origin row a; ``known`` = 1 when the line of
+    sight is already known to be clear (planar case), else a ray is cast. Returns the
+    number of rays cast (0 or 1)."""
+    c0 = faces[f, 0]
+    uu = faces[f, 1] + (su + 0.5) / samples * (faces[f, 2] - faces[f, 1])
+    vv = faces[f, 3] + (sv + 0.5) / samples * (faces[f, 4] - faces[f, 3])
+    # (u, v) are the two other axes in cyclic order after ``ax``
+    if ax == 0:
+        qx, qy, qz = c0, uu, vv
+    elif ax == 1:
+        qx, qy, qz = vv, c0, uu
+    else:
+        qx, qy, qz = uu, vv, c0
+    dx, dy, dz = qx - o[0], qy - o[1], qz - o[2]
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist < rmin or dist > rmax:
+        return 0
+    el = math.degrees(math.asin(dz / dist))
+    if el < vmin or el > vmax:
+        return 0
+    if hspan < 360.0:
+        az = (math.degrees(math.atan2(dy, dx)) - hmin) % 360.0
+        if az > hspan:
+            return 0
+    cell = fint[f, 1]
+    if known == 0:
+        dx, dy, dz = dx / dist, dy / dist, dz / dist
+        hp, t = first_hit(
+            o[0],
+            o[1],
+            o[2],
+            dx,
+            dy,
+            dz,
+            dist + 1e-6,
+            boxes,
+            x0,
+            y0,
+            bx,
+            by,
+            nx,
+            ny,
+            start,
+            items,
+            zmax,
+        )
+        if hp != p:
+            return 1
+        hc = cell_of(hp, o[0] + t * dx, o[1] + t * dy, o[2] + t * dz, boxes, dims, offset)
+        if hc != cell:
+            return 1
+    counts[a, cell] += 1
+    if dist < rng[a, cell]:
+        rng[a, cell] = dist
+    return 1 - known
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _planar_side(
+    a: int,
+    o: F64,
+    p: int,
+    ax: int,
+    plane: float,
+    s0: int,
+    s1: int,
+    samples: int,
+    rmin: float,
+    rmax: float,
+    vmin: float,
+    vmax: float,
+    hmin: float,
+    hspan: float,
+    faces: F64,
+    fint: I64,
+    boxes: F64,
+    x0: float,
+    y0: float,
+    bx: float,
+    by: float,
+    nx: int,
+    ny: int,
+    start: I64,
+    items: I64,
+    zmax: float,
+    dims: I64,
+    offset: I64,
+    counts: npt.NDArray[np.int32],
+    rng: npt.NDArray[np.float32],
+) -> int:
+    """A vertical side under planar occlusion: one horizontal ray per column of sample
+    points decides the whole column (every layer, every height sample): clear when it
+    reaches plot p first, hidden when a box at least as tall as p is in the way, and
+    tested sample by sample in 3D otherwise. Faces of a side come column by column,
+    ``nz`` layers each. Returns the rays cast."""
+    nz = dims[p, 2]
+    rays = 0
+    for col in range((s1 - s0) // nz):
+        f0 = s0 + col * nz
+        for sh in range(samples):
+            if ax == 0:  # u = y is horizontal, v = z
+                h = faces[f0, 1] + (sh + 0.5) / samples * (faces[f0, 2] - faces[f0, 1])
+                ex, ey = plane, h
+            else:  # u = z, v = x is horizontal
+                h = faces[f0, 3] + (sh + 0.5) / samples * (faces[f0, 4] - faces[f0, 3])
+                ex, ey = h, plane
+            dx, dy = ex - o[0], ey - o[1]
+            d = math.sqrt(dx * dx + dy * dy)
+            rays += 1
+            b, _ = first_hit(
+                o[0],
+                o[1],
+                o[2],
+                dx / d,
+                dy / d,
+                0.0,
+                d + 1e-6,
+                boxes,
+                x0,
+                y0,
+                bx,
+                by,
+                nx,
+                ny,
+                start,
+                items,
+                zmax,
+            )
+            if b >= 0 and b != p and boxes[b, 5] >= boxes[p, 5]:
+                continue  # a box as tall as p hides the whole column
+            if b != p:
+                for f in range(f0, f0 + nz):
+                    for sv in range(samples):
+                        su, sw = (sh, sv) if ax == 0 else (sv, sh)
+                        rays += _sample(
+                            a,
+                            o,
+                            p,
+                            f,
+                            ax,
+                            su,
+                            sw,
+                            samples,
+                            rmin,
+                            rmax,
+                            vmin,
+                            vmax,
+                            hmin,
+                            hspan,
+                            0,
+                            faces,
+                            fint,
+                            boxes,
+                            x0,
+                            y0,
+                            bx,
+                            by,
+                            nx,
+                            ny,
+                            start,
+                            items,
+                            zmax,
+                            dims,
+                            offset,
+                            counts,
+                            rng,
+                        )
+                continue
+            # clear line of sight at every height: only the range and field-of-view
+            # limits remain (kept inline: this is the hot loop)
+            az_ok = True
+            if hspan < 360.0:
+                az_ok = (math.degrees(math.atan2(dy, dx)) - hmin) % 360.0 <= hspan
+            if not az_ok:
+                continue
+            d2 = d * d
+            for f in range(f0, f0 + nz):
+                # the vertical axis is v for x sides and u for y sides
+                z0, z1 = (faces[f, 3], faces[f, 4]) if ax == 0 else (faces[f, 1], faces[f, 2])
+                cell = fint[f, 1]
+                for sv in range(samples):
+                    dz = z0 + (sv + 0.5) / samples * (z1 - z0) - o[2]
+                    dist = math.sqrt(d2 + dz * dz)
+                    if dist < rmin or dist > rmax:
+                        continue
+                    el = math.degrees(math.atan2(dz, d))
+                    if el < vmin or el > vmax:
+                        continue
+                    counts[a, cell] += 1
+                    if dist < rng[a, cell]:
+                        rng[a, cell] = dist
+    return rays
+
+
+@nb.njit(parallel=True, cache=True, error_model="numpy")
+def exact_kernel(
+    origins: F64,
+    rmin: float,
+    rmax: float,
+    vmin: float,
+    vmax: float,
+    hmin: float,
+    hspan: float,
+    samples: int,
+    cull: bool,
+    faces: F64,
+    fint: I64,
+    side_start: I64,
+    boxes: F64,
+    x0: float,
+    y0: float,
+    bx: float,
+    by: float,
+    nx: int,
+    ny: int,
+    start: I64,
+    items: I64,
+    zmax: float,
+    dims: I64,
+    offset: I64,
+    counts: npt.NDArray[np.int32],
+    rng: npt.NDArray[np.float32],
+) -> npt.NDArray[np.int64]:
+    # faces[f] = [plane, u0, u1, v0, v1]; fint[f] = [plot, cell, axis, sign]; the faces of
+    # side s (= axis * 2 + (sign > 0)) of plot p are side_start[6p + s] .. [6p + s + 1]
+    k = origins.shape[0]
+    nrays = np.zeros(k, dtype=np.int64)
+    for a in nb.prange(k):
+        counts[a, :] = 0
+        rng[a, :] = np.inf
+        o = origins[a]
+        last = -1
+        for p in range(boxes.shape[0]):
+            gx = max(boxes[p, 0] - o[0], 0.0, o[0] - boxes[p, 3])
+            gy = max(boxes[p, 1] - o[1], 0.0, o[1] - boxes[p, 4])
+            gz = max(boxes[p, 2] - o[2], 0.0, o[2] - boxes[p, 5])
+            if gx * gx + gy * gy + gz * gz > rmax * rmax:
+                continue
+            if cull:
+                blocker = _plot_hidden(
+                    o, p, last, boxes, x0, y0, bx, by, nx, ny, start, items, zmax
+                )
+                if blocker >= 0:
+                    last = blocker
+                    continue
+            for side in range(6):
+                s0, s1 = side_start[6 * p + side], side_start[6 * p + side + 1]
+                if s0 == s1:
+                    continue
+                ax = side // 2
+                sg = 1 if side % 2 else -1
+                plane = boxes[p, ax + 3] if sg > 0 else boxes[p, ax]
+                if sg * (o[ax] - plane) <= 1e-9:
+                    continue  # the side looks away from the scanner
+                if (
+                    cull
+                    and ax < 2
+                    and _side_hidden(
+                        o, p, ax, plane, boxes, x0, y0, bx, by, nx, ny, start, items, zmax
+                    )
+                ):
+                    continue
+                if cull and ax < 2:
+                    nrays[a] += _planar_side(
+                        a,
+                        o,
+                        p,
+                        ax,
+                        plane,
+                        s0,
+                        s1,
+                        samples,
+                        rmin,
+                        rmax,
+                        vmin,
+                        vmax,
+                        hmin,
+                        hspan,
+                        faces,
+                        fint,
+                        boxes,
+                        x0,
+                        y0,
+                        bx,
+                        by,
+                        nx,
+                        ny,
+                        start,
+                        items,
+                        zmax,
+                        dims,
+                        offset,
+                        counts,
+                        rng,
+                    )
+                    continue
+                for f in range(s0, s1):
+                    for su in range(samples):
+                        for sv in range(samples):
+                            nrays[a] += _sample(
+                                a,
+                                o,
+                                p,
+                                f,
+                                ax,
+                                su,
+                                sv,
+                                samples,
+                                rmin,
+                                rmax,
+                                vmin,
+                                vmax,
+                                hmin,
+                                hspan,
+                                0,
+                                faces,
+                                fint,
+                                boxes,
+                                x0,
+                                y0,
+                                bx,
+                                by,
+                                nx,
+                                ny,
+                                start,
+                                items,
+                                zmax,
+                                dims,
+                                offset,
+                                counts,
+                                rng,
+                            )
+    return nrays
+
+
+def exposed_faces(field: Field) -> tuple[F64, I64, I64]:
+    """The cell faces on the surface of each plot (the ground face only when the plot
+    floats above the ground), grouped by plot: ``faces`` (F, 5) = plane, u0, u1, v0,
+    v1 with (u, v) the two other axes in cyclic order; ``fint`` (F, 4) = plot, cell,
+    axis, outward sign; ``side_start`` (6P + 1,) starts of the faces of side
+    ``axis * 2 + (sign > 0)`` of each plot."""
+    cb, dims = field.cell_boxes, field.cell_dims
+    rows_f: list[F64] = []
+    rows_i: list[I64] = []
+    counts = np.zeros(6 * field.n_plots, dtype=np.int64)
+    for p in range(field.n_plots):
+        lo, hi = int(field.cell_offset[p]), int(field.cell_offset[p + 1])
+        idx = np.arange(lo, hi)
+        loc = np.stack(np.unravel_index(idx - lo, tuple(dims[p])), axis=1)
+        for ax in range(3):
+            ua, va = (ax + 1) % 3, (ax + 2) % 3
+            for sign in (-1, 1):
+                if ax == 2 and sign == -1 and field.plot_boxes[p, 2] <= 0.0:
+                    continue  # on the ground: its underside cannot be seen
+                on = loc[:, ax] == (0 if sign < 0 else dims[p, ax] - 1)
+                c = idx[on]
+                plane = cb[c, ax + 3] if sign > 0 else cb[c, ax]
+                f = np.stack([plane, cb[c, ua], cb[c, ua + 3], cb[c, va], cb[c, va + 3]], 1)
+                i = np.stack([np.full(len(c), p), c, np.full(len(c), ax), np.full(len(c), sign)], 1)
+                rows_f.append(f)
+                rows_i.append(i.astype(np.int64))
+                counts[6 * p + ax * 2 + (sign > 0)] += len(c)
+    side_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return np.concatenate(rows_f), np.concatenate(rows_i), side_start

@@ -1,0 +1,56 @@
+"""Turning a PlanRequest into a plan. Pure, and importable by worker processes."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import msgspec
+
+from common.field import Field, FieldError, FieldLayout, ScannerModel, build_field, load_field
+from common.messages.plan import PlanOptions, PlanRequest, PlanResult
+from services.planner.core import plan
+from services.planner.visibility import Progress
+
+
+def resolve_field(req: PlanRequest) -> tuple[FieldLayout, Field]:
+    """The request's field; raises FieldError naming the offending field."""
+    given = [
+        n for n, v in (("layout", req.layout), ("geojson", req.geojson), ("name", req.name)) if v
+    ]
+    if len(given) != 1:
+        raise FieldError(
+            f"PlanRequest: give exactly one of layout, geojson, name (got {given or 'none'})"
+        )
+    if req.layout is not None:
+        return req.layout, build_field(req.layout)
+    if req.geojson:
+        from common.field_geojson import field_from_geojson
+
+        return field_from_geojson(req.geojson.encode(), "PlanRequest.geojson")
+    return load_field(req.name)
+
+
+def request_key(req: PlanRequest) -> str:
+    """Identical requests (whatever their stamp) share a key."""
+    body = msgspec.structs.replace(req, stamp_ns=0, frame_id="")
+    return hashlib.sha256(msgspec.msgpack.encode(body)).hexdigest()
+
+
+def compute(req: PlanRequest, progress: Progress | None = None) -> PlanResult:
+    layout, fld = resolve_field(req)
+    return plan(layout, req.scanner, req.options, field=fld, progress=progress)
+
+
+def request_from_source(
+    source: str, scanner: ScannerModel, options: PlanOptions, inline: bool
+) -> PlanRequest:
+    """A request for a field named on the command line. With ``inline`` (a remote
+    planner), a local file is sent as its content, so the planner need not have it."""
+    path = Path(source)
+    if not inline or not path.exists():
+        return PlanRequest(name=source, scanner=scanner, options=options)
+    if path.suffix in (".geojson", ".json"):
+        return PlanRequest(geojson=path.read_text(), scanner=scanner, options=options)
+    layout, _ = load_field(path)
+    return PlanRequest(layout=layout, scanner=scanner, options=options)

@@ -1,0 +1,93 @@
+"""The planner service's Zenoh shell: answers PlanRequests on ``rpc/planner/plan``.
+
+Each request is planned in a worker process, so a long plan (a 2,000-plot field)
+never holds up the answer to a short or cached one; identical requests in flight
+share one computation; finished plans are cached.
+"""
+
+from __future__ import annotations
+
+import collections
+import multiprocessing
+import threading
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+
+from common import keys
+from common.field import FieldError
+from common.launcher import die_with_parent
+from common.messages.plan import PlanRequest, PlanResult
+from common.service import Context
+from common.transport import RequestError
+from services.planner.config import PlannerConfig
+from services.planner.request import compute, request_key, resolve_field
+
+
+class PlannerService:
+    def __init__(self, ctx: Context, cfg: PlannerConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        # spawn, not fork: this process runs Zenoh's threads; workers die with it
+        self.pool = ProcessPoolExecutor(
+            cfg.workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=die_with_parent,
+        )
+        self._lock = threading.Lock()
+        self._cache: collections.OrderedDict[str, PlanResult] = collections.OrderedDict()
+        self._inflight: dict[str, Future[PlanResult]] = {}
+        ctx.bus.serve(keys.PLANNER_PLAN, self.handle)
+
+    def handle(self, req: PlanRequest) -> PlanResult:
+        try:
+            resolve_field(req)  # fail fast, in this process, on a bad field
+        except FieldError as exc:
+            raise RequestError(str(exc)) from None
+        key = request_key(req)
+        with self._lock:
+            hit = self._cache.get(key)
+            if hit is not None:
+                self._cache.move_to_end(key)
+                self.ctx.log.info("plan for %s served from cache", hit.field)
+                return hit
+            fut = self._inflight.get(key)
+            if fut is None:
+                fut = self.pool.submit(compute, req)
+                self._inflight[key] = fut
+        t0 = time.monotonic()
+        try:
+            result = fut.result()
+        except (FieldError, ValueError) as exc:
+            raise RequestError(str(exc)) from None
+        finally:
+            with self._lock:
+                self._inflight.pop(key, None)
+        with self._lock:
+            self._cache[key] = result
+            while len(self._cache) > self.cfg.cache_size:
+                self._cache.popitem(last=False)
+        self.ctx.log.info(
+            "planned %s: %d locations, %s tour %.1f m, in %.1f s",
+            result.field,
+            len(result.selected),
+            result.tour.nav,
+            result.tour.length,
+            time.monotonic() - t0,
+        )
+        return result
+
+    def run(self, stop: threading.Event) -> None:
+        if self.cfg.warm_up:  # loads numba's kernels and caches the deployment's plan
+            req = PlanRequest(name=self.ctx.field)
+            threading.Thread(target=self._warm_up, args=(req,), daemon=True).start()
+        stop.wait()
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+    def _warm_up(self, req: PlanRequest) -> None:
+        try:
+            self.handle(req)
+        except RequestError as exc:
+            self.ctx.log.warning("warm-up plan for %s failed: %s", req.name, exc)
+
+
+def build(ctx: Context, cfg: PlannerConfig) -> PlannerService:
+    return PlannerService(ctx, cfg)

@@ -1,0 +1,214 @@
+"""Closed tours through node 0 (the start corner) over a distance matrix (metres).
+
+- :func:`held_karp`: exact dynamic programme, for up to ~14 nodes;
+- :func:`circuit_cpsat`: CP-SAT with a circuit constraint, proven optimal when it
+  finishes inside its time limit;
+- :func:`guided_local_search`: OR-Tools routing with GUIDED_LOCAL_SEARCH, for large tours;
+- :func:`nearest_neighbour`: the paper's baseline.
+
+Every solver returns a :class:`Tour` whose ``order`` starts at node 0 and does not
+repeat it at the end.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+
+import numpy as np
+import numpy.typing as npt
+from ortools.constraint_solver import pywrapcp, routing_enums_pb2
+from ortools.sat.python import cp_model
+
+log = logging.getLogger(__name__)
+
+F64 = npt.NDArray[np.float64]
+HELD_KARP_MAX = 14
+CPSAT_MAX = 80
+# integer arc costs for the OR-Tools solvers, in millimetres
+_SCALE = 1000.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Tour:
+    """``status``: ``"optimal"`` (proven) or ``"heuristic"``."""
+
+    order: list[int]
+    length: float
+    method: str
+    status: str
+    time_s: float
+
+
+def tour_length(d: F64, order: list[int]) -> float:
+    """Length of the closed tour ``order`` (back to its first node)."""
+    idx = np.asarray(order + order[:1])
+    return float(d[idx[:-1], idx[1:]].sum())
+
+
+def _check(d: F64) -> F64:
+    d = np.asarray(d, dtype=np.float64)
+    if d.ndim != 2 or d.shape[0] != d.shape[1] or d.shape[0] == 0:
+        raise ValueError(f"distance matrix: expected a non-empty square array, got {d.shape}")
+    if not np.all(np.isfinite(d)) or np.any(d < 0):
+        raise ValueError("distance matrix: entries must be finite and >= 0 (unreachable node?)")
+    return d
+
+
+def _trivial(d: F64, method: str, t0: float) -> Tour | None:
+    n = d.shape[0]
+    if n > 3:
+        return None
+    order = list(range(n))
+    return Tour(order, tour_length(d, order), method, "optimal", time.perf_counter() - t0)
+
+
+def nearest_neighbour(d: F64) -> Tour:
+    """Always go to the nearest unvisited node (ties: lowest index), then home."""
+    t0 = time.perf_counter()
+    d = _check(d)
+    n = d.shape[0]
+    left = np.ones(n, dtype=bool)
+    left[0] = False
+    order = [0]
+    for _ in range(n - 1):
+        row = np.where(left, d[order[-1]], np.inf)
+        j = int(np.argmin(row))
+        order.append(j)
+        left[j] = False
+    return Tour(
+        order, tour_length(d, order), "nearest-neighbour", "heuristic", time.perf_counter() - t0
+    )
+
+
+def held_karp(d: F64) -> Tour:
+    """Exact DP over subsets; raises ValueError above :data:`HELD_KARP_MAX` nodes."""
+    t0 = time.perf_counter()
+    d = _check(d)
+    n = d.shape[0]
+    if n > HELD_KARP_MAX:
+        raise ValueError(f"held_karp: {n} nodes is more than {HELD_KARP_MAX}")
+    trivial = _trivial(d, "held-karp", t0)
+    if trivial is not None:
+        return trivial
+    m = n - 1  # nodes 1..n-1 as bits 0..m-1
+    full = 1 << m
+    dp = np.full((full, m), np.inf)
+    parent = np.full((full, m), -1, dtype=np.int64)
+    dp[1 << np.arange(m), np.arange(m)] = d[0, 1:]
+    sub = d[1:, 1:]
+    for mask in range(1, full):
+        row = dp[mask]
+        for j in range(m):
+            if mask & (1 << j) or not np.isfinite(row).any():
+                continue
+            cand = row + sub[:, j]
+            k = int(np.argmin(cand))
+            nm = mask | (1 << j)
+            if cand[k] < dp[nm, j]:
+                dp[nm, j] = cand[k]
+                parent[nm, j] = k
+    last = dp[full - 1] + d[1:, 0]
+    j = int(np.argmin(last))
+    order: list[int] = []
+    mask = full - 1
+    while j >= 0:
+        order.append(j + 1)
+        pj = int(parent[mask, j])
+        mask ^= 1 << j
+        j = pj
+    order = [0, *reversed(order)]
+    return Tour(order, tour_length(d, order), "held-karp", "optimal", time.perf_counter() - t0)
+
+
+def circuit_cpsat(
+    d: F64, time_limit_s: float = 10.0, hint: list[int] | None = None, seed: int = 0
+) -> Tour:
+    """CP-SAT over arc literals with ``add_circuit``; ``status`` is ``"optimal"`` only
+    when CP-SAT proves it. Raises RuntimeError when no tour is found in time."""
+    t0 = time.perf_counter()
+    d = _check(d)
+    n = d.shape[0]
+    trivial = _trivial(d, "cp-sat-circuit", t0)
+    if trivial is not None:
+        return trivial
+    cost = np.rint(d * _SCALE).astype(np.int64)
+    m = cp_model.CpModel()
+    arcs: dict[tuple[int, int], cp_model.IntVar] = {}
+    for i in range(n):
+        for j in range(n):
+            if i != j:
+                arcs[i, j] = m.new_bool_var(f"a{i}_{j}")
+    m.add_circuit([(i, j, v) for (i, j), v in arcs.items()])
+    m.minimize(sum(int(cost[i, j]) * v for (i, j), v in arcs.items()))
+    if hint is not None:
+        nxt = {a: b for a, b in zip(hint, hint[1:] + hint[:1], strict=True)}
+        for (i, j), v in arcs.items():
+            m.add_hint(v, nxt.get(i) == j)
+    solver = cp_model.CpSolver()
+    solver.parameters.max_time_in_seconds = float(time_limit_s)
+    solver.parameters.num_workers = 8  # full portfolio; see cover.py
+    solver.parameters.random_seed = seed
+    code = solver.solve(m)
+    if code not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
+        raise RuntimeError(f"CP-SAT found no tour of {n} nodes in {time_limit_s} s")
+    succ = {i: j for (i, j), v in arcs.items() if solver.value(v)}
+    order = [0]
+    while len(order) < n:
+        order.append(succ[order[-1]])
+    status = "optimal" if code == cp_model.OPTIMAL else "heuristic"
+    return Tour(order, tour_length(d, order), "cp-sat-circuit", status, time.perf_counter() - t0)
+
+
+def guided_local_search(d: F64, time_limit_s: float = 10.0) -> Tour:
+    """OR-Tools routing: PATH_CHEAPEST_ARC then GUIDED_LOCAL_SEARCH until the limit."""
+    t0 = time.perf_counter()
+    d = _check(d)
+    n = d.shape[0]
+    trivial = _trivial(d, "guided-local-search", t0)
+    if trivial is not None:
+        return trivial
+    cost = np.rint(d * _SCALE).astype(np.int64).tolist()
+    manager = pywrapcp.RoutingIndexManager(n, 1, 0)
+    routing = pywrapcp.RoutingModel(manager)
+    cb = routing.RegisterTransitMatrix(cost)
+    routing.SetArcCostEvaluatorOfAllVehicles(cb)
+    params = pywrapcp.DefaultRoutingSearchParameters()
+    params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
+    params.local_search_metaheuristic = (
+        routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
+    )
+    params.time_limit.FromMilliseconds(max(1, int(time_limit_s * 1000)))
+    sol = routing.SolveWithParameters(params)
+    if sol is None:
+        raise RuntimeError(f"OR-Tools routing found no tour of {n} nodes")
+    order: list[int] = []
+    idx = routing.Start(0)
+    while not routing.IsEnd(idx):
+        order.append(manager.IndexToNode(idx))
+        idx = sol.Value(routing.NextVar(idx))
+    return Tour(
+        order, tour_length(d, order), "guided-local-search", "heuristic", time.perf_counter() - t0
+    )
+
+
+def solve_tour(d: F64, method: str = "auto", time_limit_s: float = 10.0) -> Tour:
+    """Best tour by ``method``: ``"held-karp"``, ``"cp-sat"``, ``"gls"`` or ``"auto"``
+    (Held-Karp up to 14 nodes, CP-SAT up to 80 falling back to GLS if it cannot prove
+    optimality, GLS beyond). Raises ValueError on an unknown method."""
+    d = _check(d)
+    n = d.shape[0]
+    if method == "held-karp" or (method == "auto" and n <= HELD_KARP_MAX):
+        return held_karp(d)
+    if method == "gls" or (method == "auto" and n > CPSAT_MAX):
+        return guided_local_search(d, time_limit_s)
+    if method not in ("cp-sat", "auto"):
+        raise ValueError(f"tour method {method!r}: expected auto, held-karp, cp-sat or gls")
+    nn = nearest_neighbour(d)
+    try:
+        tour = circuit_cpsat(d, time_limit_s, hint=nn.order)
+    except RuntimeError:
+        log.warning("CP-SAT tour timed out on %d nodes; using guided local search", n)
+        return guided_local_search(d, time_limit_s)
+    return tour

@@ -1,0 +1,5 @@
+import sys
+
+from services.register.cli import main
+
+sys.exit(main())

@@ -1,0 +1,219 @@
+"""``phenorover register RUN_DIR`` (also ``python -m services.register RUN_DIR``).
+
+Reads ``RUN_DIR/mission.db`` (read-only) and the scans it lists, places every scan by
+its recorded navigation pose and inclinometer (paper eq. 1), refines all scans jointly
+cloud to cloud, solves the target-based reference from the spheres, and writes into
+``RUN_DIR`` (or ``--out``):
+
+- ``registered.e57``: every scan with its final pose (CloudCompare, FARO SCENE);
+- ``registered.laz``: all scans merged and voxel-downsampled in the field frame (what
+  the viz service shows), and ``utm.laz`` in UTM when the field is georeferenced;
+- ``report.json``, ``report.md`` and the PNG figures of :mod:`.figures`.
+
+Every file is written under a temporary name and renamed when complete, so an
+interrupted registration leaves the previous outputs (or none), never half a file.
+Bad input is one error line on stderr and exit status 2; see :mod:`.runlog`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from services.register.pipeline import RegisterConfig, Registration, register
+from services.register.report import build_report, markdown
+from services.register.runlog import Placement, RunData, RunError, load_run, scan_inputs
+
+log = logging.getLogger("phenorover.register")
+
+
+class RegisterRunConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """``--config`` TOML: ``[placement]`` (:class:`.runlog.Placement`), ``[register]``
+    (:class:`.pipeline.RegisterConfig`), and the merged LAZ's voxel (m)."""
+
+    placement: Placement = Placement()
+    register: RegisterConfig = RegisterConfig()
+    laz_voxel: float = 0.01
+    figures: bool = True
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run_dir", type=Path, help="a mission's folder: runs/<mission>")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default: RUN_DIR)")
+    p.add_argument(
+        "--scans",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="where to look for scan files missing at their recorded path (repeatable)",
+    )
+    p.add_argument("--config", type=Path, default=None, help="TOML: placement and register")
+
+
+def _atomic(path: Path, write: Callable[[Path], object]) -> None:
+    """``write(tmp)`` then rename onto ``path``; the temporary keeps the suffix (pye57
+    and laspy pick the format by it)."""
+    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def load_config(path: Path | None) -> RegisterRunConfig:
+    if path is None:
+        return RegisterRunConfig()
+    try:
+        return msgspec.toml.decode(path.read_bytes(), type=RegisterRunConfig)
+    except OSError as exc:
+        raise RunError(f"{path}: {exc.strerror}") from None
+    except msgspec.DecodeError as exc:
+        raise RunError(f"{path}: {exc}") from None
+
+
+def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: Path) -> None:
+    """The E57, the LAZ files, the report and its figures (see the module docstring)."""
+    from services.register import figures
+    from services.register.io import write_laz, write_registered_e57
+
+    out.mkdir(parents=True, exist_ok=True)
+    outputs: dict[str, Any] = {}
+    t = time.perf_counter()
+    _atomic(out / "registered.e57", lambda p: write_registered_e57(p, reg.scans))
+    outputs["e57"] = "registered.e57"
+    log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
+    counts: dict[str, int] = {}
+    _atomic(
+        out / "registered.laz",
+        lambda p: counts.update(field=write_laz(p, reg.scans, cfg.laz_voxel)),
+    )
+    outputs["laz_field"] = "registered.laz"
+    layout = None if run.plan is None else run.plan.layout
+    if layout is not None and layout.georeferenced:
+        from common.field_geojson import field_frame
+
+        frame = field_frame(layout)
+        epsg = frame.utm.to_epsg()
+        _atomic(
+            out / "utm.laz",
+            lambda p: counts.update(
+                utm=write_laz(p, reg.scans, cfg.laz_voxel, frame.field_to_utm, epsg)
+            ),
+        )
+        outputs["laz_utm"] = "utm.laz"
+        outputs["utm_epsg"] = epsg
+    outputs["laz_points"] = counts.get("field")
+    log.info("wrote merged LAZ (%d points at %.0f mm)", counts["field"], cfg.laz_voxel * 1000)
+    figs: list[str] = []
+    if cfg.figures:
+        for make in (
+            lambda: figures.layout_route(run, out),
+            lambda: figures.stationary(run, out),
+            lambda: figures.registration_hist(reg, out),
+        ):
+            name = make()
+            if name:
+                figs.append(name)
+        log.info("wrote figures: %s", ", ".join(figs))
+    write_report(run, reg, out, outputs, figs)
+
+
+def _finite(v: Any) -> Any:
+    """``v`` with NaN and infinities as None (JSON has no NaN)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_finite(x) for x in v]
+    return v
+
+
+def write_report(
+    run: RunData, reg: Registration | None, out: Path, outputs: dict[str, Any], figs: list[str]
+) -> dict[str, Any]:
+    """``report.json`` and ``report.md`` from the mission log and the registration."""
+    rep = build_report(run, None if reg is None else reg.report, outputs)
+    text = json.dumps(_finite(rep), indent=1, allow_nan=False)
+    _atomic(out / "report.json", lambda p: p.write_text(text))
+    _atomic(out / "report.md", lambda p: p.write_text(markdown(rep, figs)))
+    return rep
+
+
+def run_register(
+    run_dir: Path,
+    out: Path | None = None,
+    scan_dirs: list[Path] | None = None,
+    cfg: RegisterRunConfig | None = None,
+) -> Registration:
+    """Register one run folder and write its outputs; raises RunError or ValueError."""
+    cfg = cfg or RegisterRunConfig()
+    run = load_run(run_dir)
+    inputs = scan_inputs(run, cfg.placement, scan_dirs or [])
+    truth = sum(s.true_pose is not None for s in inputs)
+    log.info(
+        "mission %s: %d scans to register%s",
+        run.mission["id"],
+        len(inputs),
+        f" ({truth} with simulator truth, for evaluation)" if truth else "",
+    )
+    if not run.has_altitude:
+        log.warning("the mission log has no altitude (z = 0): heights come from C2C only")
+    rcfg = cfg.register
+    if not run.has_altitude:
+        # a zero altitude is no measurement: let the clouds decide the heights
+        rcfg = msgspec.structs.replace(
+            rcfg, refine=msgspec.structs.replace(rcfg.refine, nav_sigma_z=1.0)
+        )
+    reg = register(inputs, rcfg)
+    r = reg.report
+    for name, m in (
+        ("navigation", r.navigation),
+        ("nav + C2C", r.c2c),
+        ("targets", r.target_based),
+    ):
+        if m.points_vs_truth is not None:
+            log.info("%s: mean point error vs truth %.2f cm", name, 100 * m.points_vs_truth.mean)
+    write_outputs(run, reg, cfg, out or run_dir)
+    return reg
+
+
+def cmd_register(args: argparse.Namespace) -> int:
+    t0 = time.monotonic()
+    try:
+        run_register(args.run_dir, args.out, args.scans, load_config(args.config))
+    except (RunError, ValueError, OSError) as exc:
+        print(f"phenorover register: {exc}", file=sys.stderr)
+        return 2
+    print(
+        f"registered {args.run_dir} in {time.monotonic() - t0:.0f} s: "
+        f"{(args.out or args.run_dir) / 'report.md'}",
+        flush=True,
+    )
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from common.service import setup_logging
+
+    p = argparse.ArgumentParser(prog="python -m services.register", description=__doc__)
+    add_arguments(p)
+    p.add_argument("--log-level", default="info")
+    args = p.parse_args(argv)
+    setup_logging(args.log_level)
+    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    return cmd_register(args)

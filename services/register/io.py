@@ -1,0 +1,150 @@
+"""Registered outputs: one multi-scan E57 and a merged LAZ.
+
+The E57 keeps every scan as its own data3D entry, points in the scanner frame
+(as measured) with the registration's pose as the scan's E57 pose (rotation
+quaternion w, x, y, z and translation, ``field <- scanner``): CloudCompare and FARO
+SCENE apply the pose on import, so the scans open registered and can still be
+re-registered. pye57 appends one data3D entry per ``write_scan_raw`` call.
+
+The LAZ holds all scans merged in the ``field`` frame (or UTM when a transform is
+given), voxel-downsampled, with intensity scaled to 0-65535 and the scan index as
+``point_source_id``. Coordinates are stored as integers with a 1 mm scale (LAS
+scale 0.001) and an offset at the cloud's minimum rounded to 1 km, which keeps mm
+precision for UTM northings in the millions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+from services.register.poses import F64, apply, check_pose
+
+F32 = npt.NDArray[np.float32]
+# (x, y, z) field -> (east, north, up) UTM, arrays in and out
+UtmFn = Callable[[F64, F64, F64], tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]]
+
+
+class RegisteredIOError(ValueError):
+    """An output or input file that cannot be written or read as asked."""
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PosedScan:
+    """One scan: points (N, 3) in its scanner frame, intensity (N,) in [0, 1], pose
+    (4x4 field <- scanner) and name."""
+
+    points: F64
+    intensity: F32
+    pose: F64
+    name: str
+
+
+def write_registered_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
+    """Write all ``scans`` to one E57 file, each with its pose. Raises
+    RegisteredIOError naming the scan with bad data."""
+    import pye57
+
+    if not scans:
+        raise RegisteredIOError(f"{path}: no scans to write")
+    for s in scans:
+        if s.points.ndim != 2 or s.points.shape[1] != 3 or len(s.points) != len(s.intensity):
+            raise RegisteredIOError(
+                f"{path}: scan {s.name!r}: points {s.points.shape} and intensity "
+                f"{s.intensity.shape} do not match"
+            )
+        if len(s.points) == 0:
+            raise RegisteredIOError(f"{path}: scan {s.name!r} has no points")
+        check_pose(s.pose, f"{path}: scan {s.name!r} pose")
+    e57 = pye57.E57(str(path), mode="w")
+    try:
+        for s in scans:
+            q = Rotation.from_matrix(s.pose[:3, :3]).as_quat()  # x, y, z, w
+            wxyz = np.array([q[3], q[0], q[1], q[2]]) * (1.0 if q[3] >= 0 else -1.0)
+            data = {
+                "cartesianX": np.ascontiguousarray(s.points[:, 0], dtype=np.float64),
+                "cartesianY": np.ascontiguousarray(s.points[:, 1], dtype=np.float64),
+                "cartesianZ": np.ascontiguousarray(s.points[:, 2], dtype=np.float64),
+                "intensity": np.asarray(s.intensity, dtype=np.float64),
+            }
+            e57.write_scan_raw(data, name=s.name, rotation=wxyz, translation=s.pose[:3, 3])
+    finally:
+        e57.close()
+
+
+def read_registered_e57(path: str | Path) -> list[PosedScan]:
+    """Every scan of an E57 file with its pose (identity when it has none). Raises
+    RegisteredIOError when the file cannot be read."""
+    import pye57
+
+    try:
+        e57 = pye57.E57(str(path), mode="r")
+    except Exception as exc:  # libE57 raises its own exception types
+        raise RegisteredIOError(f"{path}: cannot read E57: {exc}") from None
+    out = []
+    try:
+        for i in range(e57.scan_count):
+            raw = e57.read_scan_raw(i, ignore_unsupported_fields=True)
+            header = e57.get_header(i)
+            pose = np.eye(4)
+            if header.has_pose():
+                pose[:3, :3] = header.rotation_matrix
+                pose[:3, 3] = header.translation
+            pts = np.column_stack([raw["cartesianX"], raw["cartesianY"], raw["cartesianZ"]])
+            inten = np.asarray(raw.get("intensity", np.zeros(len(pts))), dtype=np.float32)
+            out.append(PosedScan(pts.astype(np.float64), inten, pose, str(header["name"].value())))
+    finally:
+        e57.close()
+    return out
+
+
+def voxel_merge(scans: Sequence[PosedScan], voxel: float) -> tuple[F64, F32, npt.NDArray[np.int64]]:
+    """All scans in the field frame, keeping the first point of every ``voxel`` cube
+    (m; 0 keeps all): points (N, 3), intensity (N,), scan index (N,)."""
+    pts = np.vstack([apply(s.pose, s.points) for s in scans])
+    inten = np.concatenate([s.intensity for s in scans]).astype(np.float32)
+    src = np.concatenate([np.full(len(s.points), k) for k, s in enumerate(scans)]).astype(np.int64)
+    if voxel > 0:
+        key = np.floor((pts - pts.min(axis=0)) / voxel).astype(np.int64)
+        _, first = np.unique(key, axis=0, return_index=True)
+        first.sort()
+        pts, inten, src = pts[first], inten[first], src[first]
+    return pts, inten, src
+
+
+def write_laz(
+    path: str | Path,
+    scans: Sequence[PosedScan],
+    voxel: float = 0.01,
+    to_utm: UtmFn | None = None,
+    epsg: int | None = None,
+) -> int:
+    """Write the merged, voxel-downsampled cloud (field frame, or UTM through
+    ``to_utm``; ``epsg`` recorded as the CRS when given) to a LAZ (or LAS, by the
+    suffix) file; returns the number of points written."""
+    import laspy
+
+    pts, inten, src = voxel_merge(scans, voxel)
+    if len(pts) == 0:
+        raise RegisteredIOError(f"{path}: no points to write")
+    if to_utm is not None:
+        e, n, u = to_utm(pts[:, 0], pts[:, 1], pts[:, 2])
+        pts = np.column_stack([np.asarray(e), np.asarray(n), np.asarray(u)]).astype(np.float64)
+    header = laspy.LasHeader(point_format=1, version="1.4")
+    header.scales = np.array([0.001, 0.001, 0.001])
+    header.offsets = np.floor(pts.min(axis=0) / 1000.0) * 1000.0
+    if epsg is not None:
+        from pyproj import CRS
+
+        header.add_crs(CRS.from_epsg(epsg))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
+    las.intensity = np.clip(inten * 65535.0, 0, 65535).astype(np.uint16)
+    las.point_source_id = src.astype(np.uint16)
+    las.write(str(path))
+    return len(pts)

@@ -1,0 +1,129 @@
+"""The paper's registration metrics ("Point cloud registration results", Table 1 and
+the Hausdorff figure). All distances in metres, all frames ``field``.
+
+- Target statistics: for every sphere observation (scan i, target k), the distance
+  between the centre placed by a registration's pose, ``T_i c_ik``, and the target's
+  reference position: mean 3D, mean horizontal and mean absolute vertical error.
+- Scan point statistics: each scan's points (a uniform subsample) placed by the
+  registration's pose and by the reference pose; the max and mean of the distances.
+  Against the true poses this is the error against ground truth.
+- Cloud-to-cloud (Hausdorff-style) distances from one cloud to the other: for every
+  source point its nearest reference point; mean, SD, max (the Hausdorff distance),
+  the shares below 2 and 3 cm, and the mean and SD of the per-axis components of
+  the nearest-neighbour vectors (the paper's dH_X, dH_Y, dH_Z).
+"""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial import cKDTree
+
+from services.register.poses import F64, apply
+
+I64 = npt.NDArray[np.int64]
+
+
+class TargetStats(msgspec.Struct, frozen=True, kw_only=True):
+    """Target errors (m) over ``count`` observations."""
+
+    count: int
+    mean: float
+    horizontal: float
+    vertical: float
+    max: float
+
+
+class PointStats(msgspec.Struct, frozen=True, kw_only=True):
+    """Scan point errors (m) over ``count`` subsampled points, overall and per scan."""
+
+    count: int
+    max: float
+    mean: float
+    per_scan_mean: list[float]
+
+
+class CloudDistance(msgspec.Struct, frozen=True, kw_only=True):
+    """Nearest-neighbour distances (m) from a source cloud to a reference cloud."""
+
+    count: int
+    mean: float
+    sd: float
+    max: float
+    below_2cm: float
+    below_3cm: float
+    axis_mean: tuple[float, float, float]
+    axis_sd: tuple[float, float, float]
+
+
+def target_stats(
+    centres: list[F64], labels: list[I64], poses: list[F64], reference: F64
+) -> TargetStats:
+    """Errors of sphere centres ``centres[i]`` (scanner frame) with target ``labels[i]``
+    (-1: skipped) placed by ``poses`` against target positions ``reference`` (K, 3)."""
+    errs = []
+    for c, lab, p in zip(centres, labels, poses, strict=True):
+        m = np.asarray(lab) >= 0
+        if m.any():
+            errs.append(apply(p, np.asarray(c).reshape(-1, 3)[m]) - reference[np.asarray(lab)[m]])
+    if not errs:
+        nan = math.nan
+        return TargetStats(count=0, mean=nan, horizontal=nan, vertical=nan, max=nan)
+    e = np.vstack(errs)
+    d = np.linalg.norm(e, axis=1)
+    return TargetStats(
+        count=len(e),
+        mean=float(d.mean()),
+        horizontal=float(np.hypot(e[:, 0], e[:, 1]).mean()),
+        vertical=float(np.abs(e[:, 2]).mean()),
+        max=float(d.max()),
+    )
+
+
+def subsample(points: F64, n: int, rng: np.random.Generator) -> F64:
+    """At most ``n`` points drawn uniformly without replacement."""
+    if len(points) <= n:
+        return points
+    out: F64 = points[rng.choice(len(points), n, replace=False)]
+    return out
+
+
+def point_stats(samples: list[F64], poses: list[F64], reference: list[F64]) -> PointStats:
+    """Scan point errors of ``poses`` against ``reference`` poses on per-scan point
+    samples (scanner frame)."""
+    per, alld = [], []
+    for s, p, r in zip(samples, poses, reference, strict=True):
+        d = np.linalg.norm(apply(p, s) - apply(r, s), axis=1)
+        per.append(float(d.mean()) if len(d) else math.nan)
+        alld.append(d)
+    d = np.concatenate(alld) if alld else np.zeros(0)
+    if len(d) == 0:
+        return PointStats(count=0, max=math.nan, mean=math.nan, per_scan_mean=per)
+    return PointStats(count=len(d), max=float(d.max()), mean=float(d.mean()), per_scan_mean=per)
+
+
+def cloud_distance(source: F64, reference: F64) -> CloudDistance:
+    """Nearest-neighbour distances from every ``source`` point to ``reference`` (both
+    (N, 3), field frame). Raises ValueError for an empty cloud."""
+    if len(source) == 0 or len(reference) == 0:
+        raise ValueError(f"cloud distance of empty clouds ({len(source)}, {len(reference)})")
+    d, k = cKDTree(reference).query(source, workers=1)
+    vec = source - reference[k]
+    return CloudDistance(
+        count=len(d),
+        mean=float(d.mean()),
+        sd=float(d.std()),
+        max=float(d.max()),
+        below_2cm=float((d < 0.02).mean()),
+        below_3cm=float((d < 0.03).mean()),
+        axis_mean=(float(vec[:, 0].mean()), float(vec[:, 1].mean()), float(vec[:, 2].mean())),
+        axis_sd=(float(vec[:, 0].std()), float(vec[:, 1].std()), float(vec[:, 2].std())),
+    )
+
+
+def merged(samples: list[F64], poses: list[F64]) -> F64:
+    """All samples placed by their poses, stacked (field frame)."""
+    return np.vstack([apply(p, s) for s, p in zip(samples, poses, strict=True)])

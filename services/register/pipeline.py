@@ -1,0 +1,282 @@
+"""``register``: navigation placement, C2C refinement, the target-based reference and
+all metrics for the scans of one survey. Progress goes to logging."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+from services.register.io import PosedScan, read_registered_e57
+from services.register.metrics import (
+    CloudDistance,
+    PointStats,
+    TargetStats,
+    cloud_distance,
+    merged,
+    point_stats,
+    subsample,
+    target_stats,
+)
+from services.register.poses import F64, apply, check_pose
+from services.register.refine import (
+    RefineConfig,
+    TargetObservation,
+    optimise_graph,
+    prepare,
+    prior_sigmas,
+    refine,
+)
+from services.register.spheres import SphereConfig, detect_spheres
+from services.register.targets import TargetConfig, match_targets, solve_targets
+
+log = logging.getLogger(__name__)
+Pose = list[list[float]]
+
+
+class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Everything :func:`register` takes. ``sample_points``: per-scan uniform
+    subsample for the scan point statistics; ``cloud_points``: source points for the
+    cloud-to-cloud distances."""
+
+    refine: RefineConfig = RefineConfig()
+    spheres: SphereConfig = SphereConfig()
+    targets: TargetConfig = TargetConfig()
+    sample_points: int = 5000
+    cloud_points: int = 20000
+    seed: int = 0
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ScanInput:
+    """One scan: an E57 file with its points in the scanner frame (its first data3D
+    entry is read, its pose ignored), the navigation pose (4x4 field <- scanner, see
+    :func:`.poses.scanner_pose`) and, in simulation, the true pose."""
+
+    path: Path
+    nav_pose: F64
+    true_pose: F64 | None = None
+    name: str = ""
+
+
+class ScanReport(msgspec.Struct, frozen=True, kw_only=True):
+    """Per scan: points read and kept after downsampling, spheres found (their fit
+    RMS, m), targets matched and whether they fixed the reference pose, and the poses
+    (4x4 field <- scanner, row-major lists)."""
+
+    name: str
+    points: int
+    downsampled: int
+    spheres: int
+    sphere_rms: list[float]
+    targets: int
+    target_solved: bool
+    nav_pose: Pose
+    c2c_pose: Pose
+    target_pose: Pose
+    true_pose: Pose | None = None
+
+
+class PairReport(msgspec.Struct, frozen=True, kw_only=True):
+    """One pairwise GICP (scan indices, overlap share, RMSE in m, kept or why not)."""
+
+    i: int
+    j: int
+    overlap: float
+    rmse: float
+    kept: bool
+    reason: str
+
+
+class MethodReport(msgspec.Struct, frozen=True, kw_only=True):
+    """A registration scored against the target-based reference and, in simulation,
+    against the truth (true poses; true target positions placed by them)."""
+
+    targets_vs_reference: TargetStats
+    points_vs_reference: PointStats | None
+    cloud_vs_reference: CloudDistance | None
+    targets_vs_truth: TargetStats | None = None
+    points_vs_truth: PointStats | None = None
+
+
+class RegistrationReport(msgspec.Struct, frozen=True, kw_only=True):
+    """The registration report: per scan, per pair, per method, and timings (s);
+    ``time_s`` is the registration proper (read, downsample, spheres, C2C, targets).
+    ``c2c`` is navigation + C2C with the spheres in the pose graph when the refine
+    config uses them; ``c2c_without_targets`` then gives the clouds alone."""
+
+    scans: list[ScanReport]
+    pairs: list[PairReport]
+    navigation: MethodReport
+    c2c: MethodReport
+    target_based: MethodReport
+    timings: dict[str, float]
+    time_s: float
+    c2c_without_targets: MethodReport | None = None
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Registration:
+    """The report plus per-scan poses of every method and the scans themselves
+    (scanner frame) for writing outputs."""
+
+    report: RegistrationReport
+    nav_poses: list[F64]
+    c2c_poses: list[F64]
+    target_poses: list[F64]
+    scans: list[PosedScan]
+
+
+def _as_list(m: F64) -> Pose:
+    return [[float(v) for v in row] for row in m]
+
+
+def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Registration:
+    """Register ``scans`` (see the module docstring). Raises ValueError (naming the
+    file) for an unreadable scan or a bad pose."""
+    cfg = cfg or RegisterConfig()
+    if not scans:
+        raise ValueError("register: no scans given")
+    timings: dict[str, float] = {}
+    t0 = t = time.perf_counter()
+    nav = [check_pose(s.nav_pose, f"{s.path}: navigation pose") for s in scans]
+    truth = [
+        None if s.true_pose is None else check_pose(s.true_pose, f"{s.path}: true pose")
+        for s in scans
+    ]
+    data: list[PosedScan] = []
+    for s, p in zip(scans, nav, strict=True):
+        first = read_registered_e57(s.path)
+        if not first:
+            raise ValueError(f"{s.path}: E57 file holds no scan")
+        name = s.name or Path(s.path).stem
+        data.append(PosedScan(first[0].points, first[0].intensity, p, name))
+    timings["read"] = time.perf_counter() - t
+    log.info("read %d scans (%d points)", len(data), sum(len(d.points) for d in data))
+
+    t = time.perf_counter()
+    prepared = [prepare(d.points, cfg.refine) for d in data]
+    timings["downsample"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    rng = np.random.default_rng(cfg.seed)
+    found = [detect_spheres(d.points, d.intensity, cfg.spheres, rng) for d in data]
+    centres = [np.array([f.fit.centre for f in fs]).reshape(-1, 3) for fs in found]
+    timings["spheres"] = time.perf_counter() - t
+    log.info("spheres per scan: %s", [len(f) for f in found])
+
+    t = time.perf_counter()
+    labels = match_targets(centres, nav, cfg.targets.match_radius)
+    obs = [
+        TargetObservation(i, int(lab), centres[i][m])
+        for i in range(len(data))
+        for m, lab in enumerate(labels[i])
+        if lab >= 0
+    ]
+    c2c, pairs = refine(prepared, nav, cfg.refine, obs)
+    timings["c2c"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    tsol = solve_targets(centres, nav, cfg.targets)
+    timings["targets"] = time.perf_counter() - t
+    total = time.perf_counter() - t0
+    log.info("registration took %.1f s", total)
+
+    t = time.perf_counter()
+    # what the clouds alone give (the paper's C2C), for comparison: the pose graph
+    # again without the spheres
+    plain = (
+        optimise_graph(nav, pairs, prior_sigmas(cfg.refine))
+        if cfg.refine.use_targets and obs
+        else c2c
+    )
+    samples = [subsample(d.points, cfg.sample_points, rng) for d in data]
+    # the full-resolution reference cloud, cropped like the C2C input
+    rmax = cfg.refine.max_range
+    full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
+    ref_cloud = merged(full, tsol.poses)
+    true_centres = None
+    if all(tp is not None for tp in truth):
+        true_centres = _placed_targets(
+            centres, labels, [tp for tp in truth if tp is not None], len(tsol.centres)
+        )
+
+    def score(poses: list[F64], is_reference: bool) -> MethodReport:
+        pts, cloud = None, None
+        if not is_reference:
+            pts = point_stats(samples, poses, tsol.poses)
+            src = subsample(merged(samples, poses), cfg.cloud_points, rng)
+            cloud = cloud_distance(src, ref_cloud)
+        tt, pt = None, None
+        if true_centres is not None:
+            tposes = [tp for tp in truth if tp is not None]
+            tt = target_stats(centres, labels, poses, true_centres)
+            pt = point_stats(samples, poses, tposes)
+        return MethodReport(
+            targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
+            points_vs_reference=pts,
+            cloud_vs_reference=cloud,
+            targets_vs_truth=tt,
+            points_vs_truth=pt,
+        )
+
+    nav_r, c2c_r, tgt_r = score(nav, False), score(c2c, False), score(tsol.poses, True)
+    plain_r = score(plain, False) if plain is not c2c else None
+    timings["metrics"] = time.perf_counter() - t
+    reports = [
+        ScanReport(
+            name=d.name,
+            points=len(d.points),
+            downsampled=len(pr.points),
+            spheres=len(fs),
+            sphere_rms=[f.fit.rms for f in fs],
+            targets=tsol.n_targets[k],
+            target_solved=tsol.solved[k],
+            nav_pose=_as_list(nav[k]),
+            c2c_pose=_as_list(c2c[k]),
+            target_pose=_as_list(tsol.poses[k]),
+            true_pose=None if truth[k] is None else _as_list(truth[k]),  # type: ignore[arg-type]
+        )
+        for k, (d, pr, fs) in enumerate(zip(data, prepared, found, strict=True))
+    ]
+    report = RegistrationReport(
+        scans=reports,
+        pairs=[
+            PairReport(
+                i=p.i,
+                j=p.j,
+                overlap=p.overlap,
+                rmse=p.rmse if math.isfinite(p.rmse) else -1.0,
+                kept=p.kept,
+                reason=p.reason,
+            )
+            for p in pairs
+        ],
+        navigation=nav_r,
+        c2c=c2c_r,
+        target_based=tgt_r,
+        c2c_without_targets=plain_r,
+        timings=timings,
+        time_s=total,
+    )
+    out_scans = [dataclasses.replace(d, pose=p) for d, p in zip(data, c2c, strict=True)]
+    return Registration(report, nav, c2c, tsol.poses, out_scans)
+
+
+def _placed_targets(
+    centres: list[F64], labels: list[npt.NDArray[np.int64]], poses: list[F64], k: int
+) -> F64:
+    """Target positions as the mean of the observations placed by ``poses``."""
+    out = np.full((k, 3), np.nan)
+    for t in range(k):
+        obs = [apply(p, c[lab == t]) for c, lab, p in zip(centres, labels, poses, strict=True)]
+        obs = [o for o in obs if len(o)]
+        if obs:
+            out[t] = np.vstack(obs).mean(axis=0)
+    return out

@@ -1,0 +1,288 @@
+"""The survey report: the paper's tables from a stored mission log and a registration.
+
+:func:`build_report` takes only what is stored (the mission log read by
+:mod:`.runlog`) and the registration's report (:class:`.pipeline.RegistrationReport`),
+so a report can be remade from a run folder without running the mission again.
+:func:`markdown` renders it as ``report.md``; ``report.json`` is the same dict.
+
+Tables:
+
+- navigation: the plan (locations, tour under BR or AHA navigation, its length and
+  the nearest-neighbour baseline) and what the survey did (scans done, failed,
+  skipped, survey time);
+- stationary errors per scan location (paper Figures 21-22): distance from the
+  planned point to the recorded mean position, heading error, the SD of the pose
+  over the scan, the inclinometer's pitch and roll;
+- registration (paper Table 1): target statistics and scan point statistics of
+  navigation-only, navigation + C2C and target-based registration against the
+  target-based reference and, in simulation, against the truth; the Hausdorff-style
+  distances of each cloud to the target-based cloud (mean, SD, share below 2 and 3
+  cm, per axis).
+
+Lengths in the tables are centimetres, angles degrees; report.json keeps SI units
+(m, rad) where it copies the registration report.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import msgspec
+
+from common.geo import wrap_angle
+from services.register.pipeline import MethodReport, RegistrationReport
+from services.register.runlog import RunData
+
+Json = dict[str, Any]
+METHODS = (("navigation", "Nav. sensors only"), ("c2c", "Nav. sensors + C2C"))
+PAPER = {  # Table 1 of the paper (cm), for the reader's comparison
+    "target_based": {"mean": 0.59, "horizontal": 0.53, "vertical": 0.22, "max": 2.10, "pt": 1.37},
+    "c2c": {"mean": 1.72, "horizontal": 1.34, "vertical": 0.82, "max": 3.02, "pt": 2.07},
+}
+
+
+def _cm(v: float | None) -> float | None:
+    return None if v is None or not math.isfinite(v) else round(100.0 * v, 3)
+
+
+def navigation_table(run: RunData) -> Json:
+    steps = run.steps
+    tour = None if run.plan is None else run.plan.tour
+    ended = [s.ended_ns for s in steps if s.ended_ns is not None]
+    created = int(run.mission["created_ns"])  # type: ignore[call-overload]
+    return {
+        "mission": run.mission["id"],
+        "field": run.mission["field"],
+        "state": run.mission["state"],
+        "locations": len(steps),
+        "done": sum(s.status == "done" for s in steps),
+        "failed": sum(s.status == "failed" for s in steps),
+        "skipped": sum(s.status == "skipped" for s in steps),
+        "navigation": None if tour is None else tour.nav,
+        "route_m": None if tour is None else tour.length,
+        "nearest_neighbour_m": None if tour is None else tour.nn_length,
+        "survey_s": (max(ended) - created) / 1e9 if ended else None,
+        "has_altitude": run.has_altitude,
+    }
+
+
+def stationary_table(run: RunData) -> list[Json]:
+    rows = []
+    for s in run.steps:
+        row: Json = {"scan_id": s.scan_id, "location": s.cand_id, "status": s.status}
+        row["planned"] = [s.x, s.y, s.yaw]
+        if s.mean_x is not None and s.mean_y is not None:
+            row["distance_to_planned_cm"] = _cm(math.hypot(s.mean_x - s.x, s.mean_y - s.y))
+            row["mean"] = [s.mean_x, s.mean_y, s.mean_yaw]
+        if s.mean_yaw is not None and s.yaw is not None:
+            row["heading_error_deg"] = math.degrees(wrap_angle(s.mean_yaw - s.yaw))
+        for k in ("sd_x", "sd_y", "sd_z"):
+            v = getattr(s, k)
+            row[f"{k}_cm"] = _cm(v)
+        row["sd_yaw_deg"] = None if s.sd_yaw is None else math.degrees(s.sd_yaw)
+        row["pitch_deg"] = None if s.pitch is None else math.degrees(s.pitch)
+        row["roll_deg"] = None if s.roll is None else math.degrees(s.roll)
+        if s.reason:
+            row["reason"] = s.reason
+        rows.append(row)
+    return rows
+
+
+def _method_row(name: str, label: str, m: MethodReport, truth: bool) -> Json:
+    t = m.targets_vs_truth if truth else m.targets_vs_reference
+    p = m.points_vs_truth if truth else m.points_vs_reference
+    c = None if truth else m.cloud_vs_reference
+    row: Json = {"method": name, "label": label}
+    row["targets"] = (
+        None
+        if t is None or t.count == 0
+        else {
+            "count": t.count,
+            "mean_cm": _cm(t.mean),
+            "horizontal_cm": _cm(t.horizontal),
+            "vertical_cm": _cm(t.vertical),
+        }
+    )
+    row["points"] = (
+        None
+        if p is None or p.count == 0
+        else {
+            "count": p.count,
+            "max_cm": _cm(p.max),
+            "mean_cm": _cm(p.mean),
+            "per_scan_mean_cm": [_cm(v) for v in p.per_scan_mean],
+        }
+    )
+    row["hausdorff"] = (
+        None
+        if c is None
+        else {
+            "mean_cm": _cm(c.mean),
+            "sd_cm": _cm(c.sd),
+            "max_cm": _cm(c.max),
+            "below_2cm": c.below_2cm,
+            "below_3cm": c.below_3cm,
+            "axis_mean_cm": [_cm(v) for v in c.axis_mean],
+            "axis_sd_cm": [_cm(v) for v in c.axis_sd],
+        }
+    )
+    return row
+
+
+def registration_table(rep: RegistrationReport) -> Json:
+    solved = sum(s.target_solved for s in rep.scans)
+    methods = [*METHODS, ("target_based", "Target-based")]
+    if rep.c2c_without_targets is not None:
+        # the spheres joined the C2C pose graph: also what the clouds alone give
+        methods.insert(2, ("c2c_without_targets", "Nav. sensors + C2C, spheres left out"))
+    has_truth = rep.c2c.points_vs_truth is not None
+    return {
+        "scans": len(rep.scans),
+        "reference_solved_scans": solved,
+        "reference_complete": solved == len(rep.scans),
+        "spheres_per_scan": [s.spheres for s in rep.scans],
+        "pairs_kept": sum(p.kept for p in rep.pairs),
+        "pairs_tried": len(rep.pairs),
+        "time_s": rep.time_s,
+        "vs_reference": [_method_row(n, lab, getattr(rep, n), False) for n, lab in methods],
+        "vs_truth": (
+            [_method_row(n, lab, getattr(rep, n), True) for n, lab in methods]
+            if has_truth
+            else None
+        ),
+        "paper_cm": PAPER,
+    }
+
+
+def build_report(run: RunData, rep: RegistrationReport | None, outputs: Json) -> Json:
+    """The report as a JSON-able dict (see the module docstring); ``rep`` None when the
+    mission has no registration (no done scan)."""
+    return {
+        "navigation": navigation_table(run),
+        "stationary": stationary_table(run),
+        "registration": None if rep is None else registration_table(rep),
+        "registration_detail": None if rep is None else msgspec.to_builtins(rep),
+        "outputs": outputs,
+    }
+
+
+def _f(v: Any, digits: int = 2) -> str:
+    return "–" if v is None else f"{v:.{digits}f}"
+
+
+def _method_lines(rows: list[Json], paper: bool) -> list[str]:
+    out = [
+        "| method | target mean | horizontal | vertical | max point error | mean point error |"
+        + (" paper mean point error |" if paper else ""),
+        "|---|---|---|---|---|---|" + ("---|" if paper else ""),
+    ]
+    for r in rows:
+        t, p = r["targets"] or {}, r["points"] or {}
+        cells = [
+            r["label"],
+            _f(t.get("mean_cm")),
+            _f(t.get("horizontal_cm")),
+            _f(t.get("vertical_cm")),
+            _f(p.get("max_cm")),
+            _f(p.get("mean_cm")),
+        ]
+        if paper:
+            cells.append(_f(PAPER.get(r["method"], {}).get("pt")))
+        out.append("| " + " | ".join(cells) + " |")
+    return out
+
+
+def markdown(report: Json, figures: list[str]) -> str:
+    """``report.md``: the tables and the figures (paths relative to the report)."""
+    nav = report["navigation"]
+    lines = [
+        f"# Survey report: {nav['mission']}",
+        "",
+        f"Field `{nav['field']}`, mission {nav['state']}.",
+        "",
+        "## Navigation",
+        "",
+        "| scan locations | done | failed | skipped | navigation | route (m) "
+        "| nearest-neighbour route (m) | survey time (s) |",
+        "|---|---|---|---|---|---|---|---|",
+        f"| {nav['locations']} | {nav['done']} | {nav['failed']} | {nav['skipped']} "
+        f"| {nav['navigation'] or '–'} | {_f(nav['route_m'], 1)} "
+        f"| {_f(nav['nearest_neighbour_m'], 1)} | {_f(nav['survey_s'], 0)} |",
+        "",
+        "## Stationary errors per scan location",
+        "",
+        "Recorded navigation pose over each scan against the planned point.",
+        "",
+        "| scan | location | status | distance to planned (cm) | heading error (deg) "
+        "| SD x (cm) | SD y (cm) | SD heading (deg) | pitch (deg) | roll (deg) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in report["stationary"]:
+        lines.append(
+            f"| {r['scan_id']} | {r['location']} | {r['status']} "
+            f"| {_f(r.get('distance_to_planned_cm'))} | {_f(r.get('heading_error_deg'))} "
+            f"| {_f(r.get('sd_x_cm'))} | {_f(r.get('sd_y_cm'))} | {_f(r.get('sd_yaw_deg'), 3)} "
+            f"| {_f(r.get('pitch_deg'))} | {_f(r.get('roll_deg'))} |"
+        )
+    reg = report["registration"]
+    lines += ["", "## Registration", ""]
+    if reg is None:
+        lines.append("No scan was done: nothing to register.")
+    else:
+        lines += [
+            f"{reg['scans']} scans registered in {reg['time_s']:.1f} s; "
+            f"{reg['pairs_kept']} of {reg['pairs_tried']} scan pairs used by the pose graph; "
+            f"spheres found per scan: {reg['spheres_per_scan']}; the target-based reference "
+            f"fixes {reg['reference_solved_scans']} of {reg['scans']} scans"
+            + (
+                "."
+                if reg["reference_complete"]
+                else " (the others keep their navigation "
+                "pose, so errors against it understate the truth)."
+            ),
+            "",
+            "Against the target-based reference (cm; paper Table 1):",
+            "",
+            *_method_lines(reg["vs_reference"], paper=True),
+        ]
+        if reg["vs_truth"]:
+            lines += ["", "Against the simulator's truth (cm):", ""]
+            lines += _method_lines(reg["vs_truth"], paper=False)
+        lines += [
+            "",
+            "Cloud to the target-based cloud (Hausdorff-style nearest-neighbour distances):",
+            "",
+            "| cloud | mean (cm) | SD (cm) | < 2 cm | < 3 cm | dX mean/SD | dY mean/SD "
+            "| dZ mean/SD |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in reg["vs_reference"]:
+            h = r["hausdorff"]
+            if h is None:
+                continue
+            ax = [
+                f"{_f(m)} / {_f(s)}"
+                for m, s in zip(h["axis_mean_cm"], h["axis_sd_cm"], strict=True)
+            ]
+            lines.append(
+                f"| {r['label']} | {_f(h['mean_cm'])} | {_f(h['sd_cm'])} "
+                f"| {h['below_2cm']:.0%} | {h['below_3cm']:.0%} | {' | '.join(ax)} |"
+            )
+        lines += [
+            "",
+            "Paper (ENGR, nav. sensors + C2C): 1.25 cm mean, SD 0.82 cm, 85 % < 2 cm, 95 % < 3 cm.",
+        ]
+    if not nav["has_altitude"]:
+        lines += [
+            "",
+            "Note: the mission log records no altitude (the navigation pose's z is 0 "
+            "throughout), so navigation-only placement is off vertically by the terrain "
+            "height and only cloud-to-cloud refinement places scans in height.",
+        ]
+    outs = report["outputs"]
+    if outs:
+        lines += ["", "## Outputs", ""] + [f"- {k}: `{v}`" for k, v in outs.items() if v]
+    if figures:
+        lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figures]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,167 @@
+"""A finished (or stopped) survey as registration reads it: ``runs/<mission>/mission.db``
+opened read-only, its plan, and every done scan's file and recorded pose.
+
+The mission log is never written here: it is opened with SQLite's ``mode=ro``, so a
+registration that fails or is killed cannot lose or corrupt it. Every problem with
+the input (no database, not a mission log, a scan file missing, a bad pose) raises
+:class:`RunError` with one line naming the file and what is wrong.
+
+Scan files: a step's ``file`` is where the scanner stored the scan (on its card). It
+is used when it exists; otherwise the file of the same name is looked for in the
+given ``scan_dirs``, then in ``RUN_DIR/scans`` and ``RUN_DIR`` (a card copied next to
+the log on another machine).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sqlite3
+from collections.abc import Sequence
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from common.geo import rot_zyx
+from common.messages.plan import PlanResult
+from services.mission.log import Step
+from services.register.pipeline import ScanInput
+from services.register.poses import F64, PoseError, scanner_pose
+from services.sim.truth_file import read_truth
+
+
+class RunError(ValueError):
+    """The run folder cannot be registered; the message names the file and the cause."""
+
+
+class Placement(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """How a recorded navigation pose places the scanner (paper eq. 1).
+
+    ``lever``: the scanner's optical centre in base_link (m; the simulated Husky's
+    FARO sits 1.0 m above base_link). ``mount_yaw_deg``: the scanner's zero azimuth
+    from base_link x. ``antenna_height``: the GNSS antennas' height above base_link
+    (m) when navigation computes base_link from them with a *planar* lever arm (the
+    EKF does: it has no tilt): on a tilted robot the antennas lean
+    ``antenna_height * tilt`` sideways of base_link, which this corrects with the
+    inclinometer's pitch and roll; 0 when navigation already accounts for tilt.
+    """
+
+    lever: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    mount_yaw_deg: float = 0.0
+    antenna_height: float = 1.10
+
+
+@dataclasses.dataclass(frozen=True)
+class RunData:
+    """The mission row, its plan (None when the log holds none), its steps and events,
+    and whether the log has an altitude (the navigation pose's z; a planar estimate
+    records 0 throughout)."""
+
+    run_dir: Path
+    mission: dict[str, object]
+    plan: PlanResult | None
+    steps: list[Step]
+    events: list[tuple[int, str, str]]
+    has_altitude: bool
+
+    @property
+    def done(self) -> list[Step]:
+        return [s for s in self.steps if s.status == "done"]
+
+
+def load_run(run_dir: str | Path) -> RunData:
+    """Read ``run_dir/mission.db`` read-only; raises RunError."""
+    run = Path(run_dir)
+    db = run / "mission.db"
+    if not db.is_file():
+        raise RunError(f"{db}: no mission log here (is {run} a run folder?)")
+    try:
+        con = sqlite3.connect(f"file:{db.resolve()}?mode=ro", uri=True)
+    except sqlite3.Error as exc:
+        raise RunError(f"{db}: cannot open: {exc}") from None
+    try:
+        row = con.execute("SELECT id, field, created_ns, plan_json, state FROM mission").fetchone()
+        if row is None:
+            raise RunError(f"{db}: the mission table is empty")
+        mission = dict(zip(("id", "field", "created_ns", "plan_json", "state"), row, strict=True))
+        cur = con.execute("SELECT * FROM steps ORDER BY idx")
+        names = [d[0] for d in cur.description]
+        steps = [Step(**dict(zip(names, r, strict=True))) for r in cur.fetchall()]
+        events = [tuple(e) for e in con.execute("SELECT stamp_ns, level, text FROM events")]
+    except sqlite3.DatabaseError as exc:
+        raise RunError(f"{db}: not a readable mission log: {exc}") from None
+    except TypeError as exc:  # a steps table with other columns
+        raise RunError(f"{db}: steps table does not match the mission log schema: {exc}") from None
+    finally:
+        con.close()
+    plan = None
+    text = mission.pop("plan_json")
+    if text:
+        try:
+            plan = msgspec.json.decode(str(text), type=PlanResult)
+        except msgspec.DecodeError as exc:
+            raise RunError(f"{db}: mission.plan_json is not a plan: {exc}") from None
+    done = [s for s in steps if s.status == "done"]
+    has_alt = any((s.mean_z or 0.0) != 0.0 or (s.sd_z or 0.0) != 0.0 for s in done)
+    return RunData(run, mission, plan, steps, events, has_alt)
+
+
+def find_scan(step: Step, run_dir: Path, scan_dirs: Sequence[Path] = ()) -> Path:
+    """The scan file of ``step`` (see the module docstring); raises RunError."""
+    if not step.file:
+        raise RunError(f"scan {step.scan_id}: the mission log records no file for it")
+    recorded = Path(step.file)
+    if recorded.is_file():
+        return recorded
+    where = [*scan_dirs, run_dir / "scans", run_dir]
+    for d in where:
+        if (d / recorded.name).is_file():
+            return d / recorded.name
+    looked = ", ".join(str(d) for d in where)
+    raise RunError(f"scan {step.scan_id}: file {recorded} not found (also looked in {looked})")
+
+
+def nav_pose(step: Step, place: Placement, has_altitude: bool = True) -> F64:
+    """4x4 ``field <- scanner`` from the step's recorded mean pose and inclinometer
+    (paper eq. 1, :func:`.poses.scanner_pose`), base_link corrected for the planar
+    antenna lever (see :class:`Placement`). Raises RunError naming the scan."""
+    vals = (step.mean_x, step.mean_y, step.mean_yaw, step.pitch, step.roll)
+    if any(v is None for v in vals):
+        raise RunError(f"scan {step.scan_id}: the mission log has no pose or tilt for it")
+    x, y, yaw, pitch, roll = (float(v) for v in vals)  # type: ignore[arg-type]
+    z = float(step.mean_z or 0.0) if has_altitude else 0.0
+    try:
+        m = scanner_pose(x, y, z, yaw, pitch, roll, place.lever, math.radians(place.mount_yaw_deg))
+    except PoseError as exc:
+        raise RunError(f"scan {step.scan_id}: {exc}") from None
+    if place.antenna_height:
+        # the antennas sit at R (0, 0, h) from base_link, a planar EKF takes them at
+        # (0, 0, h): its base_link is off by the horizontal part of R e_z * h
+        lean = rot_zyx(roll, pitch, yaw)[:, 2] * place.antenna_height
+        m[:2, 3] -= lean[:2]
+    return m
+
+
+def scan_inputs(run: RunData, place: Placement, scan_dirs: Sequence[Path] = ()) -> list[ScanInput]:
+    """A :class:`.pipeline.ScanInput` per done scan, with the simulator's true pose
+    when one was stored beside the scan (evaluation only). Raises RunError."""
+    if not run.done:
+        raise RunError(f"{run.run_dir / 'mission.db'}: no scan is done in this mission")
+    out = []
+    for s in run.done:
+        path = find_scan(s, run.run_dir, scan_dirs)
+        try:
+            truth = read_truth(path)
+        except ValueError as exc:
+            raise RunError(str(exc)) from None
+        true_pose = None if truth is None else np.asarray(truth.scanner_pose, dtype=np.float64)
+        out.append(
+            ScanInput(
+                path=path,
+                nav_pose=nav_pose(s, place, run.has_altitude),
+                true_pose=true_pose,
+                name=f"scan_{s.scan_id:03d}",
+            )
+        )
+    return out

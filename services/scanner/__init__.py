@@ -1,0 +1,1 @@
+"""The scanner service: the FARO scanner over the CAN automation interface."""

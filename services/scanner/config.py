@@ -1,0 +1,33 @@
+from typing import Annotated, Literal
+
+import msgspec
+
+from services.scanner.emulator import FaroFaults
+
+Pos = Annotated[float, msgspec.Meta(gt=0)]
+
+
+class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The FARO scanner over its CAN automation interface.
+
+    ``backend``: ``can`` (python-can with ``interface``/``channel``/``bitrate``:
+    ``socketcan``/``can0`` on the Jetson) or ``sim`` (a FARO emulator on a virtual bus
+    in this process; completed scans are rendered by the simulator into
+    ``storage_dir``). ``stuck_timeout_s`` and ``status_timeout_s`` run on the service's
+    clock (sim time in simulation), ``ack_timeout_s`` on wall time.
+    """
+
+    backend: Literal["can", "sim"] = "sim"
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: Annotated[int, msgspec.Meta(gt=0)] = 500_000
+    storage_dir: str = "runs/scanner-card"
+    ack_timeout_s: Pos = 0.5
+    retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
+    stuck_timeout_s: Pos = 60.0
+    status_timeout_s: Pos = 5.0
+    status_hz: Annotated[float, msgspec.Meta(gt=0, le=50)] = 5.0
+    # simulation only
+    sim_faults: FaroFaults = msgspec.field(default_factory=FaroFaults)
+    sim_scan_time_s: Pos | None = None  # default: the profile's FARO scan time
+    render_step_deg: Annotated[float, msgspec.Meta(gt=0, le=5)] = 0.36

@@ -1,0 +1,67 @@
+"""Simulated Hokuyo UST-05LX 2D lidar (the paper's obstacle sensor).
+
+The scan plane is the lidar's x-y plane, tilted with the robot (so on a slope it can
+see the ground ahead); beams go counter-clockwise from -135 deg to +135 deg about the
+lidar's +z, 0 deg straight ahead. Ranges are metres as float32, ``inf`` where there
+is no valid return (nothing within range, or closer than the minimum range).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+from common.geo import rot_zyx
+from services.sim.robot import RobotState, pose_matrix
+from services.sim.scene import Scene
+
+F32 = npt.NDArray[np.float32]
+F64 = npt.NDArray[np.float64]
+
+
+class LidarConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Hokuyo UST-05LX (metres, degrees). Field of view, step and range from Hokuyo's
+    datasheet (270 deg, 0.25 deg, 0.06-5 m, accuracy +-40 mm, read here as a 2-sigma
+    band: sigma 20 mm). The paper gives no mounting; the default puts the lidar on
+    the Husky's front bumper, 0.35 m above the ground contact plane, facing forward."""
+
+    fov_deg: Annotated[float, msgspec.Meta(gt=0, le=360)] = 270.0
+    step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.25
+    min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.06
+    max_range: Annotated[float, msgspec.Meta(gt=0)] = 5.0
+    sigma: Annotated[float, msgspec.Meta(ge=0)] = 0.02
+    mount_xyz: tuple[float, float, float] = (0.45, 0.0, 0.35)
+    mount_yaw_deg: float = 0.0
+
+
+def beam_angles(cfg: LidarConfig) -> F64:
+    """Beam angles (rad) in the lidar frame, first to last."""
+    n = math.floor(cfg.fov_deg / cfg.step_deg + 1e-9) + 1
+    out: F64 = np.radians(-cfg.fov_deg / 2 + np.arange(n) * cfg.step_deg)
+    return out
+
+
+def lidar_pose(state: RobotState, cfg: LidarConfig) -> F64:
+    """4x4 transform field <- lidar."""
+    m = np.eye(4)
+    m[:3, :3] = rot_zyx(0.0, 0.0, math.radians(cfg.mount_yaw_deg))
+    m[:3, 3] = cfg.mount_xyz
+    out: F64 = pose_matrix(state) @ m
+    return out
+
+
+def scan(scene: Scene, state: RobotState, cfg: LidarConfig, rng: np.random.Generator) -> F32:
+    """One sweep from the robot at ``state``: ranges (n_beams,) float32, inf = none."""
+    if cfg.max_range <= cfg.min_range:
+        raise ValueError(f"lidar max_range={cfg.max_range} <= min_range={cfg.min_range}")
+    a = beam_angles(cfg)
+    local = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
+    m = lidar_pose(state, cfg)
+    t, _, _ = scene.cast(m[:3, 3], local @ m[:3, :3].T, cfg.max_range)
+    r = t + cfg.sigma * rng.standard_normal(len(t))
+    r = np.where(np.isfinite(t) & (r >= cfg.min_range), np.minimum(r, cfg.max_range), np.inf)
+    return r.astype(np.float32)

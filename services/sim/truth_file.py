@@ -1,0 +1,50 @@
+"""Ground truth of a simulated scan, written next to its E57 for evaluation only.
+
+The simulator knows where the scanner really stood; a real scanner does not, so this
+file exists only in simulation and only scoring code (``phenorover register``'s
+"error against truth") reads it. Nothing that places or registers scans may use it.
+``<scan>.e57`` gets ``<scan>.truth.json``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import msgspec
+
+
+class ScanTruth(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The true scanner pose (4x4 ``field <- scanner``, row-major) and base_link pose
+    (field frame; metres, radians) while the scan was measured. Evaluation only."""
+
+    evaluation_only: bool = True
+    stamp_ns: int
+    scanner_pose: list[list[float]]
+    x: float
+    y: float
+    z: float
+    roll: float
+    pitch: float
+    yaw: float
+
+
+def truth_path(scan: str | Path) -> Path:
+    """Where the truth of the scan file ``scan`` is stored."""
+    p = Path(scan)
+    return p.with_name(p.stem + ".truth.json")
+
+
+def write_truth(scan: str | Path, truth: ScanTruth) -> None:
+    truth_path(scan).write_bytes(msgspec.json.encode(truth))
+
+
+def read_truth(scan: str | Path) -> ScanTruth | None:
+    """The truth of ``scan``, None when there is none (a real scan); raises ValueError
+    naming the file when it is malformed."""
+    path = truth_path(scan)
+    if not path.exists():
+        return None
+    try:
+        return msgspec.json.decode(path.read_bytes(), type=ScanTruth)
+    except (OSError, msgspec.DecodeError) as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -1,0 +1,228 @@
+"""The simulated world: ground, plants, targets and obstacles of one field, and the
+sensors that look at them. Pure computation: the sim service owns the clock and the
+bus and calls into a :class:`World`. Everything is in the ``field`` frame (metres,
+radians) and is the ground truth the evaluation scores against.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+from common.field import Field, FieldLayout
+from services.sim import lidar as lidar_mod
+from services.sim import robot as robot_mod
+from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
+from services.sim.render import FaroNoise, Scan, ScanSettings, render
+from services.sim.robot import RobotConfig, RobotState
+from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
+from services.sim.targets import (
+    Survey,
+    TargetConfig,
+    Targets,
+    build_targets,
+    drive_network,
+    planned_survey,
+)
+from services.sim.terrain import Terrain, TerrainConfig, build_terrain
+
+F64 = npt.NDArray[np.float64]
+U8 = npt.NDArray[np.uint8]
+Pos = Annotated[float, msgspec.Meta(gt=0)]
+
+# base_link positions of the two GNSS antennas (m): 0.95 m apart along x, 1.10 m up
+GNSS_ANTENNAS = ((-0.475, 0.0, 1.10), (0.475, 0.0, 1.10))
+
+
+class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
+    """An axis-aligned box standing on the ground, centred at (x, y) (m)."""
+
+    x: float
+    y: float
+    size_x: Pos
+    size_y: Pos
+    height: Pos
+
+
+class CylinderObstacle(
+    msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="cylinder"
+):
+    """A vertical cylinder standing on the ground (a person's leg, a post) (m)."""
+
+    x: float
+    y: float
+    radius: Pos
+    height: Pos
+
+
+Obstacle = BoxObstacle | CylinderObstacle
+
+
+class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Everything that shapes the world. ``seed`` seeds terrain, plants and target
+    heights (sensor noise takes the caller's generator). ``soil``: traction factor of
+    the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky (the paper's
+    southern paths). ``scanner_mount``: the FARO optical centre in base_link (m); the
+    1.0 m height is the planner's assumption (``ScannerModel.height``)."""
+
+    seed: int = 0
+    terrain: TerrainConfig = TerrainConfig()
+    foliage: FoliageConfig = FoliageConfig()
+    targets: TargetConfig = TargetConfig()
+    obstacles: list[Obstacle] = []
+    soil: Annotated[float, msgspec.Meta(ge=0, le=10)] = 1.0
+    robot: RobotConfig = RobotConfig()
+    scanner_noise: FaroNoise = FaroNoise()
+    lidar: lidar_mod.LidarConfig = lidar_mod.LidarConfig()
+    scanner_mount: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+def _obstacle_arrays(obstacles: list[Obstacle], terrain: Terrain) -> tuple[F64, F64]:
+    boxes, cyls = [], []
+    for ob in obstacles:
+        z = float(terrain.height(ob.x, ob.y))
+        if isinstance(ob, BoxObstacle):
+            hx, hy = ob.size_x / 2, ob.size_y / 2
+            boxes.append(
+                [ob.x - hx, ob.y - hy, z - 0.2, ob.x + hx, ob.y + hy, z + ob.height, OBSTACLE]
+            )
+        else:
+            cyls.append([ob.x, ob.y, z - 0.2, z + ob.height, ob.radius, OBSTACLE])
+    return np.array(boxes, dtype=np.float64).reshape(-1, 7), np.array(cyls).reshape(-1, 6)
+
+
+class World:
+    """Terrain, foliage, targets and obstacles of one field, built deterministically
+    from ``(layout, field, cfg)``."""
+
+    def __init__(self, layout: FieldLayout, field: Field, cfg: WorldConfig | None = None) -> None:
+        self.layout, self.field = layout, field
+        self.cfg = cfg = cfg or WorldConfig()
+        self.terrain: Terrain = build_terrain(field.bounds, cfg.terrain, cfg.seed)
+        self.foliage: Foliage = build_foliage(field.plot_boxes, self.terrain, cfg.foliage, cfg.seed)
+        ob_boxes, ob_cyls = _obstacle_arrays(cfg.obstacles, self.terrain)
+        self.targets: Targets = self._place_targets(ob_cyls, ob_boxes)
+        n = len(self.targets.spheres)
+        spheres = np.column_stack([self.targets.spheres, np.full(n, SPHERE)])
+        cyls = np.vstack([np.column_stack([self.targets.poles, np.full(n, POLE)]), ob_cyls])
+        self.scene = Scene(self.terrain, self.foliage, spheres, cyls, ob_boxes)
+        # the 2D lidar sees plots as solid boxes reaching below the ground
+        plots = field.plot_boxes.copy()
+        plots[:, 2] = self.terrain.hmin - 0.5
+        plots[:, 5] += self.terrain.hmax
+        plot_boxes = np.column_stack([plots, np.full(len(plots), PLOT)])
+        self.lidar_scene = Scene(
+            self.terrain, None, spheres, cyls, np.vstack([plot_boxes, ob_boxes])
+        )
+
+    def _place_targets(self, ob_cyls: F64, ob_boxes: F64) -> Targets:
+        """The spheres: given sites, or chosen for the survey's scans (see
+        :mod:`services.sim.targets`) as seen through the plants and obstacles."""
+        tc = self.cfg.targets
+        if tc.sites is not None or tc.count == 0:
+            return build_targets(self.field, self.terrain, tc, None, None)
+        if tc.scan_sites is not None:
+            xy = np.array(tc.scan_sites, dtype=np.float64).reshape(-1, 2)
+            paths = drive_network(self.field)
+        else:
+            xy, legs = planned_survey(self.layout, self.field)
+            paths = np.concatenate([legs, drive_network(self.field)])
+        origins = np.array(
+            [
+                self.scanner_pose(self.settle(RobotState(x=float(x), y=float(y), yaw=0.0)))[:3, 3]
+                for x, y in xy
+            ]
+        ).reshape(-1, 3)
+        stops = np.vstack([xy, self.field.origin_xy[None, :]])
+        bare = Scene(self.terrain, self.foliage, np.zeros((0, 5)), ob_cyls, ob_boxes)
+        survey = Survey(origins=origins, paths=paths, stops=stops)
+        return build_targets(self.field, self.terrain, tc, bare, survey)
+
+    @property
+    def sphere_centres(self) -> F64:
+        """Ground-truth sphere centres (S, 3), field frame (m)."""
+        return self.targets.centres
+
+    def settle(self, state: RobotState) -> RobotState:
+        """``state`` placed on the ground (z, pitch, roll from the terrain)."""
+        return robot_mod.settle(state, self.terrain, self.cfg.robot)
+
+    def step_robot(
+        self, state: RobotState, cmd_v: float, cmd_w: float, dt: float, rng: np.random.Generator
+    ) -> RobotState:
+        """Advance the robot under a commanded twist (see :func:`robot.step`)."""
+        return robot_mod.step(
+            state, cmd_v, cmd_w, dt, self.terrain, rng, self.cfg.robot, self.cfg.soil
+        )
+
+    def encoder_twist(self, state: RobotState, rng: np.random.Generator) -> tuple[float, float]:
+        """Wheel-odometry (v, w) of ``state`` (blind to slip, noisy)."""
+        return robot_mod.encoder_twist(state, rng, self.cfg.robot)
+
+    def gnss_truth(self, state: RobotState) -> F64:
+        """True field-frame positions (2, 3) of the two GNSS antenna phase centres."""
+        return robot_mod.body_to_field(state, np.array(GNSS_ANTENNAS))
+
+    def scanner_pose(self, state: RobotState) -> F64:
+        """4x4 field <- scanner of the FARO on the robot at ``state``."""
+        m = robot_mod.pose_matrix(state)
+        m[:3, 3] = robot_mod.body_to_field(state, np.array(self.cfg.scanner_mount))
+        return m
+
+    def render_scan(self, pose: F64, settings: ScanSettings, rng: np.random.Generator) -> Scan:
+        """A FARO scan from the scanner pose ``pose`` (4x4, field <- scanner)."""
+        return render(self.scene, pose, settings, rng, self.cfg.scanner_noise)
+
+    def lidar_scan(self, state: RobotState, rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        """A Hokuyo sweep from the robot at ``state`` (float32 m, inf = no return)."""
+        return lidar_mod.scan(self.lidar_scene, state, self.cfg.lidar, rng)
+
+    def truth_points(self, spacing: float = 0.05) -> tuple[F64, U8]:
+        """A dense, deterministic sample of every surface (field frame, m) with labels:
+        ground on a ``spacing`` grid over the field bounds, the exposed foliage voxels
+        (centres of occupied voxels with an empty face-neighbour), and sphere and pole
+        surfaces at about ``spacing``. For scoring registrations (cloud-to-truth)."""
+        if not spacing > 0:
+            raise ValueError(f"spacing must be > 0 m, got {spacing}")
+        xmin, ymin, xmax, ymax = self.field.bounds
+        gx, gy = np.meshgrid(np.arange(xmin, xmax, spacing), np.arange(ymin, ymax, spacing))
+        parts = [np.column_stack([gx.ravel(), gy.ravel(), self.terrain.height(gx, gy).ravel()])]
+        labels = [np.full(gx.size, GROUND, np.uint8)]
+        fol = self.foliage
+        for p in range(fol.n_plots):
+            g = fol.grid(p)
+            occ = g != EMPTY
+            pad = np.pad(occ, 1, constant_values=False)
+            inner = pad[2:, 1:-1, 1:-1] & pad[:-2, 1:-1, 1:-1] & pad[1:-1, 2:, 1:-1]
+            inner &= pad[1:-1, :-2, 1:-1] & pad[1:-1, 1:-1, 2:] & pad[1:-1, 1:-1, :-2]
+            idx = np.argwhere(occ & ~inner)
+            parts.append(fol.origin[p] + (idx + 0.5) * fol.voxel)
+            labels.append(np.where(g[tuple(idx.T)] == 2, STEM_HIT, LEAF_HIT).astype(np.uint8))
+        for c in self.targets.spheres:
+            n = max(8, int(4 * math.pi * c[3] ** 2 / spacing**2))
+            parts.append(c[:3] + c[3] * _fibonacci_sphere(n))
+            labels.append(np.full(n, SPHERE, np.uint8))
+        for x, y, zlo, zhi, r in self.targets.poles:
+            z = np.arange(max(zlo, float(self.terrain.height(x, y))), zhi, spacing)
+            a = np.arange(0, 2 * math.pi, max(spacing / r, math.pi / 4))
+            zz, aa = np.meshgrid(z, a)
+            parts.append(
+                np.column_stack(
+                    [x + r * np.cos(aa.ravel()), y + r * np.sin(aa.ravel()), zz.ravel()]
+                )
+            )
+            labels.append(np.full(zz.size, POLE, np.uint8))
+        return np.vstack(parts), np.concatenate(labels)
+
+
+def _fibonacci_sphere(n: int) -> F64:
+    """``n`` nearly uniform unit vectors."""
+    k = np.arange(n) + 0.5
+    z = 1 - 2 * k / n
+    phi = math.pi * (3 - math.sqrt(5)) * k
+    rr = np.sqrt(1 - z * z)
+    return np.column_stack([rr * np.cos(phi), rr * np.sin(phi), z])

@@ -1,0 +1,1 @@
+"""The viz service: the live rerun dashboard."""

@@ -1,0 +1,171 @@
+"""Devices benchmark: the simulated GNSS compass over 10 minutes of driving, through
+the whole receiver path (RTK error model -> NMEA GST/GGA -> parser -> fixes ->
+compass), and the time per simulated FARO scan of ENGR at 0.36 deg.
+
+Prints the error models beside the results. Report, never assert.
+    python tests/bench/bench_devices.py [--json OUT] [--minutes 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common.field import load_field
+from common.field_geojson import field_frame
+from common.geo import wrap_angle
+from services.gnss.compass import CompassConfig
+from services.gnss.nmea import Gga, Gst, parse_sentence
+from services.gnss.receiver import receiver_output
+from services.gnss.rtk_model import RtkErrorModel, RtkModelConfig
+from services.gnss.solution import FixBuilder, heading
+from services.planner.core import plan
+from services.sim.render import ScanSettings, read_e57, write_e57
+from services.sim.robot import RobotState
+from services.sim.scene import LABEL_NAMES
+from services.sim.world import World
+
+
+def compass_drive(minutes: float, seed: int = 7) -> dict[str, float]:
+    layout, fld = load_field("engr")
+    world = World(layout, fld)
+    frame = field_frame(layout)
+    rtk = RtkModelConfig()
+    rng = np.random.default_rng(seed)
+    models = {a: RtkErrorModel(rtk, np.random.default_rng([seed, a])) for a in (1, 2)}
+    builders = {a: FixBuilder(a, {"FIX": 0.014, "FLOAT": 0.25, "SINGLE": 1.2}) for a in (1, 2)}
+    cfg = CompassConfig()
+    s = world.settle(RobotState(x=28.5, y=1.0, yaw=math.pi))
+    dt, n = 0.02, int(minutes * 60 / 0.02)
+    errs, valid, total = [], 0, 0
+    for k in range(n):
+        t = k * dt
+        # a lap around the field's outer lanes, turning in place at the corners
+        phase = (t % 80.0) / 80.0
+        v, w = (0.5, 0.0) if phase < 0.85 else (0.0, 0.4)
+        s = world.step_robot(s, v, w, dt, rng)
+        if k % 5:
+            continue
+        truth = world.gnss_truth(s)
+        fixes = {}
+        for a in (1, 2):
+            p = (float(truth[a - 1, 0]), float(truth[a - 1, 1]), float(truth[a - 1, 2]))
+            text = receiver_output(frame, p, models[a].step(0.1), t)
+            for line in text.encode().splitlines():
+                sent = parse_sentence(line)
+                if isinstance(sent, Gst):
+                    builders[a].on_gst(sent)
+                elif isinstance(sent, Gga):
+                    fix = builders[a].on_gga(sent, int(t * 1e9))
+                    if fix is not None:
+                        fixes[a] = fix
+        if len(fixes) < 2:
+            continue
+        total += 1
+        hd = heading(fixes[1], fixes[2], frame, cfg)
+        if hd.valid:
+            valid += 1
+            errs.append(math.degrees(wrap_angle(hd.yaw - s.yaw)))
+    e = np.array(errs)
+    noise = rtk.fix
+    return {
+        "minutes": minutes,
+        "epochs": total,
+        "valid_share": valid / max(total, 1),
+        "mean_deg": float(e.mean()),
+        "sd_deg": float(e.std()),
+        "rms_deg": float(np.sqrt((e**2).mean())),
+        "p95_abs_deg": float(np.percentile(abs(e), 95)),
+        "model_fix_h_mm": noise.h_const_m * 1000,
+        "model_fix_v_mm": noise.v_const_m * 1000,
+        "model_ppm": noise.h_ppm,
+        "model_baseline_km": rtk.baseline_m / 1000,
+        "model_corr_s": noise.correlation_time_s,
+        "compass_baseline_m": cfg.baseline_m,
+        "predicted_sd_deg": math.degrees(
+            math.sqrt(2) * (noise.h_const_m + noise.h_ppm * 1e-6 * rtk.baseline_m) / cfg.baseline_m
+        ),
+    }
+
+
+def scan_timing(out: Path) -> dict[str, float]:
+    layout, fld = load_field("engr")
+    world = World(layout, fld)
+    result = plan(layout)
+    settings = ScanSettings()
+    rng = np.random.default_rng(0)
+    times, npts, labels = [], [], {name: 0 for name in LABEL_NAMES[1:]}
+    for k, cid in enumerate(result.selected):
+        j = fld.candidate_index(cid)
+        s = world.settle(RobotState(x=float(fld.cand_xy[j, 0]), y=float(fld.cand_xy[j, 1])))
+        t0 = time.perf_counter()
+        scan = world.render_scan(world.scanner_pose(s), settings, rng)
+        path = out / f"Scan_{k + 1:05d}.e57"
+        write_e57(path, scan.points, scan.intensity, name=path.stem)
+        times.append(time.perf_counter() - t0)
+        npts.append(len(scan.points))
+        for lab, name in enumerate(LABEL_NAMES[1:], start=1):
+            labels[name] += int(np.count_nonzero(scan.label == lab))
+    pts, _, _ = read_e57(out / "Scan_00001.e57")
+    return {
+        "scans": len(times),
+        "first_scan_s": times[0],
+        "mean_scan_s": float(np.mean(times[1:])),
+        "mean_points": float(np.mean(npts)),
+        "e57_points_read": len(pts),
+        "rays_per_scan": int(settings_rays(settings)),
+        **{f"points_{k}": v for k, v in labels.items()},
+    }
+
+
+def settings_rays(s: ScanSettings) -> float:
+    return round((s.vertical_end_deg - s.vertical_start_deg) / s.step_deg) * round(
+        (s.horizontal_end_deg - s.horizontal_start_deg) / s.step_deg
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--minutes", type=float, default=10.0)
+    args = ap.parse_args()
+    c = compass_drive(args.minutes)
+    print(
+        f"GNSS compass over {c['minutes']:.0f} min of driving ({c['epochs']} epochs at 10 Hz, "
+        f"{100 * c['valid_share']:.1f} % valid):"
+    )
+    print(
+        f"  heading error mean {c['mean_deg']:+.3f} deg, SD {c['sd_deg']:.3f} deg, "
+        f"RMS {c['rms_deg']:.3f} deg, 95 % below {c['p95_abs_deg']:.3f} deg"
+    )
+    print(
+        f"  error model: Reach M2 fix {c['model_fix_h_mm']:.0f} mm + {c['model_ppm']:.0f} ppm "
+        f"horizontal ({c['model_fix_v_mm']:.0f} mm vertical), base {c['model_baseline_km']:.1f} km"
+        f", Gauss-Markov {c['model_corr_s']:.0f} s; baseline {c['compass_baseline_m']:.2f} m;"
+        f" predicted SD {c['predicted_sd_deg']:.2f} deg"
+    )
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        s = scan_timing(Path(d))
+    print(
+        f"FARO scans of ENGR at 0.36 deg ({s['rays_per_scan']:,} rays), {s['scans']} plan "
+        f"locations: first {s['first_scan_s']:.2f} s (incl. compilation), then "
+        f"{s['mean_scan_s']:.2f} s per scan incl. E57 writing; {s['mean_points']:,.0f} points "
+        "per scan"
+    )
+    print(
+        "  points by surface (all scans): "
+        + ", ".join(f"{k[7:]} {v:,}" for k, v in s.items() if k.startswith("points_"))
+    )
+    if args.json:
+        args.json.write_text(json.dumps({"compass": c, "scans": s}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

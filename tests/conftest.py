@@ -1,0 +1,109 @@
+"""Shared fixtures: free loopback ports, a Zenoh router in the test process, a client
+bus, and process management that fails a test which leaves a process behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+from hypothesis import settings
+
+from common.config import zenoh_config
+from common.launcher import free_loopback_port
+from common.transport import Bus
+
+REPO = Path(__file__).resolve().parent.parent
+os.environ.setdefault("RERUN_ANALYTICS", "0")
+
+# CI replays the same examples every run (a submission must not pass or fail by luck);
+# developers keep hypothesis' random search, which is what finds new edge cases.
+settings.register_profile("ci", derandomize=True, deadline=None)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
+
+
+def free_port() -> int:
+    return free_loopback_port()
+
+
+@pytest.fixture
+def router_endpoint() -> Iterator[str]:
+    """A Zenoh router on a free loopback port, hosted by the test process."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    session = zenoh.open(zenoh_config("router", [ep], []))
+    yield ep
+    session.close()
+
+
+@pytest.fixture
+def client_bus(router_endpoint: str) -> Iterator[Bus]:
+    session = zenoh.open(zenoh_config("client", [], [router_endpoint]))
+    bus = Bus(session, "test")
+    yield bus
+    bus.close()
+    session.close()
+
+
+class Procs:
+    """Starts processes and guarantees they are gone after the test."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen[bytes]] = []
+
+    def start(self, *args: str, log: Path | None = None) -> subprocess.Popen[bytes]:
+        out = open(log, "wb") if log is not None else subprocess.DEVNULL  # noqa: SIM115
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PHENOROVER_LOG="info")
+        p = subprocess.Popen(
+            [sys.executable, *args], cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env
+        )
+        self.procs.append(p)
+        return p
+
+    def service(
+        self, module_or_path: str, endpoint: str, *extra: str, log: Path | None = None
+    ) -> subprocess.Popen[bytes]:
+        target = ["-m", module_or_path] if not module_or_path.endswith(".py") else [module_or_path]
+        return self.start(*target, "--connect", endpoint, "--machine", "test", *extra, log=log)
+
+    def stop_all(self) -> list[int]:
+        leaked = []
+        for p in self.procs:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + 5.0
+        for p in self.procs:
+            try:
+                p.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                leaked.append(p.pid)
+                p.kill()
+                p.wait()
+        return leaked
+
+
+@pytest.fixture
+def procs() -> Iterator[Procs]:
+    ps = Procs()
+    yield ps
+    leaked = ps.stop_all()
+    assert not leaked, f"processes did not stop on SIGTERM within 5 s: {leaked}"
+
+
+def pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is dead for our purposes
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split()[2] != "Z"
+    except FileNotFoundError:
+        return False

@@ -1,0 +1,130 @@
+"""The scanner service as a process, driving the FARO emulator over its (virtual) CAN
+bus; the test plays the simulator's renderer."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from common.cli import wait_alive
+from common.messages.scan import ScannerState, ScanProfile, StartScan
+from common.messages.sim import RenderReply, RenderRequest
+from common.transport import Bus, RpcError
+from tests.conftest import Procs
+
+
+def start(procs: Procs, ep: str, bus: Bus, tmp: Path, *sets: str) -> None:
+    args = ["--set", f"storage_dir='{tmp / 'card'}'", "--set", "sim_scan_time_s=1.0"]
+    for s in sets:
+        args += ["--set", s]
+    procs.service("services.scanner", ep, *args, log=tmp / "scanner.log")
+    assert wait_alive(bus.session, {"scanner"}, timeout=20)
+
+
+def serve_render(bus: Bus, fail: bool = False) -> list[RenderRequest]:
+    seen: list[RenderRequest] = []
+
+    def render(req: RenderRequest) -> RenderReply:
+        seen.append(req)
+        if fail:
+            raise RuntimeError("disk full")
+        Path(req.path).write_bytes(b"e57")
+        return RenderReply(path=req.path, points=3, pitch=0.01, roll=-0.02, render_s=0.0)
+
+    bus.serve(keys.SIM_RENDER, render)
+    return seen
+
+
+def start_scan(bus: Bus, scan_id: int, resolution: int = 4, project: str = "") -> None:
+    cmd = StartScan(profile=ScanProfile(scan_id=scan_id, resolution=resolution), project=project)
+    deadline = time.monotonic() + 10
+    while True:  # the queryable comes up a moment after the liveliness token
+        try:
+            bus.call(keys.SCANNER_CMD, cmd, timeout=5)
+            return
+        except RpcError as exc:
+            if "no reply" not in str(exc) or time.monotonic() > deadline:
+                raise
+
+
+def test_scan_runs_to_done_with_file_and_inclinometer(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    renders = serve_render(client_bus)
+    status = client_bus.latest(keys.SCANNER_STATUS)
+    start(procs, router_endpoint, client_bus, tmp_path)
+    with pytest.raises(RpcError, match="project"):  # a path out of the card: refused
+        start_scan(client_bus, 7, project="../elsewhere")
+    start_scan(client_bus, 7, project="survey-1")
+    assert status.wait_for(lambda s: s.state == ScannerState.SCANNING, timeout=10)
+    done = status.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
+    assert done is not None and done.scan_id == 7 and done.progress == 1.0
+    assert Path(done.file).read_bytes() == b"e57"
+    assert Path(done.file) == (tmp_path / "card" / "survey-1" / "Scan_00007.e57").resolve()
+    assert math.isclose(done.pitch, 0.01, abs_tol=1e-4)
+    assert math.isclose(done.roll, -0.02, abs_tol=1e-4)
+    assert [r.scan_id for r in renders] == [7]
+
+
+def test_lost_ack_is_retried(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    serve_render(client_bus)
+    status = client_bus.latest(keys.SCANNER_STATUS)
+    start(procs, router_endpoint, client_bus, tmp_path, "sim_faults.lose_first_acks=1")
+    start_scan(client_bus, 3)
+    assert status.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
+
+
+@pytest.mark.parametrize(
+    ("fault", "reason"),
+    [("sim_faults.error_code=42", "42"), ("sim_faults.stuck_at_pct=30.0", "stuck")],
+)
+def test_device_errors_are_reported_not_hidden(
+    procs: Procs,
+    router_endpoint: str,
+    client_bus: Bus,
+    tmp_path: Path,
+    fault: str,
+    reason: str,
+) -> None:
+    serve_render(client_bus)
+    status = client_bus.latest(keys.SCANNER_STATUS)
+    start(procs, router_endpoint, client_bus, tmp_path, fault, "stuck_timeout_s=1.0")
+    start_scan(client_bus, 5)
+    err = status.wait_for(lambda s: s.state != ScannerState.SCANNING and s.scan_id == 5, timeout=20)
+    assert err is not None and err.state == ScannerState.ERROR, err
+    assert reason in err.error and err.file == ""
+
+
+def test_a_scan_that_cannot_be_stored_fails(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    serve_render(client_bus, fail=True)
+    status = client_bus.latest(keys.SCANNER_STATUS)
+    start(procs, router_endpoint, client_bus, tmp_path)
+    start_scan(client_bus, 9)
+    err = status.wait_for(lambda s: s.state in (ScannerState.ERROR, ScannerState.DONE), timeout=20)
+    assert err is not None and err.state == ScannerState.ERROR
+
+
+def test_no_ack_is_a_clear_error_within_the_timeout(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    start(procs, router_endpoint, client_bus, tmp_path, "sim_faults.no_ack=true")
+    t0 = time.monotonic()
+    with pytest.raises(RpcError, match=r"scanner: .*ACK"):
+        start_scan(client_bus, 1)
+    assert time.monotonic() - t0 < 5.0  # 3 attempts x 0.5 s, plus the round trip
+
+
+def test_bad_resolution_is_rejected_with_the_field_named(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    start(procs, router_endpoint, client_bus, tmp_path)
+    with pytest.raises(RpcError, match=r"ScanProfile\.resolution: 1/3"):
+        start_scan(client_bus, 1, resolution=3)

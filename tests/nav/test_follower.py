@@ -1,0 +1,131 @@
+"""The follower closing the loop around a simple unicycle (no slip): a square route
+with in-place corners ends at the goal, within the heading tolerance."""
+
+from __future__ import annotations
+
+import math
+
+from common.geo import wrap_angle
+from common.messages.nav import Leg, NavState
+from services.nav.follower import Follower, FollowerConfig
+
+
+def run(
+    f: Follower,
+    x: float,
+    y: float,
+    yaw: float,
+    seconds: float,
+    obstacle_until: float = -1.0,
+    localized: bool = True,
+):
+    dt = 0.05
+    events, xtes = [], []
+    for k in range(int(seconds / dt)):
+        t = k * dt
+        c = f.step(t, x, y, yaw, localized, t < obstacle_until)
+        if c.event:
+            events.append(c.event)
+        if c.state == NavState.DRIVING:
+            xtes.append(abs(c.cross_track))
+        x += c.v * dt * math.cos(yaw)
+        y += c.v * dt * math.sin(yaw)
+        yaw = wrap_angle(yaw + c.w * dt)
+    return x, y, yaw, events, xtes
+
+
+def square() -> list[Leg]:
+    pts = [(0, 0), (5, 0), (5, 3), (0, 3), (0, 0)]
+    legs = []
+    for i in range(4):
+        (x0, y0), (x1, y1) = pts[i], pts[i + 1]
+        nx, ny = pts[(i + 2) % 5] if i < 3 else (5, 0)
+        legs.append(Leg(x0=x0, y0=y0, x1=x1, y1=y1, final_yaw=math.atan2(ny - y1, nx - x1)))
+    return legs
+
+
+def test_square_route_arrives_once_within_tolerances() -> None:
+    f = Follower(FollowerConfig())
+    f.start("sq", square())
+    x, y, yaw, events, xtes = run(f, 0.0, 0.0, 0.0, 120.0)
+    assert events == ["arrived"]
+    assert math.hypot(x, y) < 0.03
+    assert abs(wrap_angle(yaw - 0.0)) <= math.radians(2.0) + 1e-6
+    assert max(xtes) < 0.05
+
+
+def test_in_place_rotation_ends_within_tolerance() -> None:
+    f = Follower(FollowerConfig())
+    f.start("turn", [Leg(x0=0, y0=0, x1=0, y1=0, final_yaw=math.radians(90))])
+    _, _, yaw, events, _ = run(f, 0.0, 0.0, 0.0, 60.0)
+    assert events == ["arrived"]
+    assert abs(wrap_angle(yaw - math.radians(90))) <= math.radians(2.0)
+
+
+def test_obstacle_waits_then_resumes_or_blocks() -> None:
+    f = Follower(FollowerConfig(obstacle_timeout_s=10.0))
+    f.start("a", [Leg(x0=0, y0=0, x1=3, y1=0)])
+    x, _, _, events, _ = run(f, 0.0, 0.0, 0.0, 60.0, obstacle_until=5.0)
+    assert events == ["arrived"] and abs(x - 3.0) < 0.03
+    f = Follower(FollowerConfig(obstacle_timeout_s=10.0))
+    f.start("b", [Leg(x0=0, y0=0, x1=3, y1=0)])
+    x, _, _, events, _ = run(f, 0.0, 0.0, 0.0, 30.0, obstacle_until=100.0)
+    assert events == ["blocked"] and x == 0.0 and f.state == NavState.BLOCKED
+
+
+def test_no_motion_while_not_localized() -> None:
+    f = Follower(FollowerConfig())
+    f.start("c", [Leg(x0=0, y0=0, x1=3, y1=0)])
+    x, _, _, events, _ = run(f, 0.0, 0.0, 0.0, 10.0, localized=False)
+    assert x == 0.0 and events == [] and f.state == NavState.NOT_LOCALIZED
+
+
+def run_lagging(
+    f: Follower, x: float, y: float, yaw: float, seconds: float = 300.0
+) -> tuple[float, float, float, list[str]]:
+    """Close the loop around a unicycle whose wheels follow commands with a 0.15 s
+    lag (which overshoots a plain stop by centimetres), until an event."""
+    v = w = 0.0
+    dt, tau = 0.05, 0.15
+    for k in range(int(seconds / dt)):
+        c = f.step(k * dt, x, y, yaw, True, False)
+        if c.event:
+            return x, y, yaw, [c.event]
+        v += (c.v - v) * (1 - math.exp(-dt / tau))
+        w += (c.w - w) * (1 - math.exp(-dt / tau))
+        x += v * dt * math.cos(yaw)
+        y += v * dt * math.sin(yaw)
+        yaw = wrap_angle(yaw + w * dt)
+    return x, y, yaw, []
+
+
+def test_fine_positioning_at_the_goal_with_a_lagging_drivetrain() -> None:
+    cfg = FollowerConfig()
+    f = Follower(cfg)
+    goal_yaw = math.radians(90)
+    f.start("fine", [Leg(x0=0, y0=0, x1=4, y1=0, final_yaw=goal_yaw)])
+    x, _, yaw, events = run_lagging(f, 0.0, 0.0, 0.0)
+    assert events == ["arrived"]
+    assert abs(x - 4.0) <= cfg.fine_tolerance_m
+    assert abs(math.degrees(wrap_angle(yaw - goal_yaw))) <= cfg.fine_heading_tolerance_deg
+
+
+def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
+    """Stopped 1 cm beside the goal (a skid-steer robot cannot creep sideways), the
+    robot backs up along the leg and comes in again, ending within the tolerances."""
+    cfg = FollowerConfig()
+    f = Follower(cfg)
+    f.start("side", [Leg(x0=0, y0=0, x1=2, y1=0)])
+    x, y, yaw, events = run_lagging(f, 1.99, 0.01, 0.0)
+    assert events == ["arrived"]
+    assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
+    assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
+    assert f._reapproaches >= 1
+
+
+def test_no_fine_positioning_when_disabled() -> None:
+    f = Follower(FollowerConfig(fine=False))
+    f.start("coarse", [Leg(x0=0, y0=0, x1=1, y1=0)])
+    _, _, _, events, _ = run(f, 0.0, 0.0, 0.0, 20.0)
+    assert events == ["arrived"]
+    assert f.phase.value == "final"

@@ -1,0 +1,220 @@
+import math
+
+import laspy
+import numpy as np
+import pytest
+
+from common.field import load_field
+from common.geo import rot_zyx
+from services.register.io import (
+    PosedScan,
+    RegisteredIOError,
+    read_registered_e57,
+    write_laz,
+    write_registered_e57,
+)
+from services.register.metrics import cloud_distance, point_stats
+from services.register.poses import (
+    PoseError,
+    apply,
+    euler_zyx,
+    inv,
+    perturb,
+    scanner_pose,
+    tilt_from_axis_inclinations,
+)
+from services.register.refine import (
+    RefineConfig,
+    TargetObservation,
+    optimise_graph,
+    prepare,
+    prior_sigmas,
+    refine,
+)
+from services.register.spheres import SphereConfig, detect_spheres, fit_sphere
+from services.register.targets import kabsch, solve_targets
+from services.sim.render import ScanSettings
+from services.sim.robot import RobotState
+from services.sim.world import World
+
+
+def _partial_sphere(rng, centre, radius, n=400, noise=0.001, cap=0.3):
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    view = -centre / np.linalg.norm(centre)  # the cap facing the scanner at the origin
+    d = d[d @ view > cap]
+    return centre + radius * d + rng.normal(scale=noise, size=d.shape)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sphere_fit_recovers_centre_and_radius_from_a_noisy_cap(seed):
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform([3, -5, 0], [10, 5, 2])
+    pts = _partial_sphere(rng, centre, 0.1)
+    known = fit_sphere(pts, 0.1)
+    free = fit_sphere(pts, None)
+    assert np.linalg.norm(known.centre - centre) < 0.002
+    assert np.linalg.norm(free.centre - centre) < 0.002
+    assert abs(free.radius - 0.1) < 0.002
+    assert known.rms < 0.002
+
+
+def test_detect_spheres_among_clutter():
+    rng = np.random.default_rng(3)
+    centre = np.array([6.0, 1.0, 0.8])
+    sph = _partial_sphere(rng, centre, 0.1, n=800)
+    ground = np.column_stack(
+        [rng.uniform(1, 10, 5000), rng.uniform(-4, 4, 5000), np.full(5000, -1)]
+    )
+    pts = np.vstack([sph, ground])
+    inten = np.concatenate([rng.uniform(0.6, 0.85, len(sph)), rng.uniform(0.1, 0.4, len(ground))])
+    found = detect_spheres(pts, inten, SphereConfig())
+    assert len(found) == 1
+    assert np.linalg.norm(found[0].fit.centre - centre) < 0.002
+
+
+def test_navigation_pose_matches_the_sim_scanner_pose():
+    layout, field = load_field("spl")
+    world = World(layout, field)
+    s = world.settle(RobotState(x=5.0, y=3.0, yaw=0.4))
+    nav = scanner_pose(s.x, s.y, s.z, s.yaw, s.pitch, s.roll, lever=world.cfg.scanner_mount)
+    np.testing.assert_allclose(nav, world.scanner_pose(s), atol=1e-12)
+    roll, pitch, yaw = euler_zyx(nav)
+    assert (roll, pitch, yaw) == pytest.approx((s.roll, s.pitch, s.yaw))
+    with pytest.raises(PoseError, match="non-finite"):
+        scanner_pose(math.nan, 0, 0, 0, 0, 0)
+
+
+def test_axis_inclinations_give_zyx_tilt():
+    r = rot_zyx(0.02, -0.03, 1.0)
+    ix, iy = math.asin(r[2, 0]), math.asin(r[2, 1])
+    assert tilt_from_axis_inclinations(ix, iy) == pytest.approx((-0.03, 0.02), abs=1e-12)
+
+
+def test_kabsch_and_target_solution_recover_poses():
+    rng = np.random.default_rng(4)
+    targets = rng.uniform([-5, -5, 1], [5, 5, 2], (4, 3))
+    truth = [perturb(np.eye(4), rng.normal(0, 1, 3), rng.normal(0, 0.1, 3)) for _ in range(3)]
+    seen = [apply(inv(t), targets) for t in truth]
+    np.testing.assert_allclose(kabsch(seen[0], targets), truth[0], atol=1e-9)
+    nav = [perturb(t, rng.normal(0, 0.03, 3), np.radians([0.0, 0.0, 0.5])) for t in truth]
+    sol = solve_targets(seen, nav)
+    assert sol.solved == [True, True, True]
+    # the targets fix the relative poses; the gauge follows the navigation poses
+    for t, p in zip(truth, sol.poses, strict=True):
+        rel = inv(sol.poses[0]) @ p - inv(truth[0]) @ t
+        assert np.abs(rel).max() < 1e-4
+
+
+def test_shared_spheres_tie_scans_in_the_pose_graph_without_any_pair():
+    # two scans with no cloud pair, both seeing the same two spheres (and the
+    # compensator's tilt): the graph recovers their relative pose, which the
+    # navigation alone gets wrong by centimetres and 0.5 deg
+    rng = np.random.default_rng(5)
+    spheres = np.array([[3.0, 1.0, 1.8], [-2.0, 4.0, 1.6]])
+    truth = [
+        perturb(np.eye(4), [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]),
+        perturb(np.eye(4), [4.0, 3.0, 1.1], [0.0, 0.0, 1.0]),
+    ]
+    nav = [
+        perturb(t, rng.normal(0, 0.02, 3), np.radians([0.0, 0.0, d]))
+        for t, d in zip(truth, (0.5, -0.5), strict=True)
+    ]
+    obs = [
+        TargetObservation(i, k, apply(inv(t), spheres[k : k + 1])[0])
+        for i, t in enumerate(truth)
+        for k in range(2)
+    ]
+    cfg = RefineConfig()
+    alone = optimise_graph(nav, [], prior_sigmas(cfg))
+    tied = optimise_graph(nav, [], prior_sigmas(cfg), obs, 0.001)
+
+    def rel_error(poses):
+        return np.abs(inv(poses[0]) @ poses[1] - inv(truth[0]) @ truth[1]).max()
+
+    assert rel_error(alone) > 0.01
+    assert rel_error(tied) < 1e-3
+
+
+@pytest.fixture(scope="module")
+def lane_scans():
+    layout, field = load_field("engr")
+    world = World(layout, field)
+    rng = np.random.default_rng(7)
+    out = []
+    for y in (11.8, 15.4):
+        state = world.settle(RobotState(x=1.5, y=y, yaw=0.0))
+        true = world.scanner_pose(state)
+        out.append((world.render_scan(true, ScanSettings(step_deg=0.5), rng), true))
+    return out
+
+
+def test_refinement_restores_a_perturbed_pair(lane_scans):
+    (s0, t0), (s1, t1) = lane_scans
+    nav = [
+        perturb(t0, [0.02, -0.01, 0.03], np.radians([0.1, -0.1, 0.5])),
+        perturb(t1, [-0.03, 0.02, -0.02], np.radians([-0.1, 0.1, -0.8])),
+    ]
+    cfg = RefineConfig()
+    poses, pairs = refine([prepare(s.points, cfg) for s in (s0, s1)], nav, cfg)
+    assert pairs[0].kept, pairs[0].reason
+    sample = s1.points[::20]
+    sample = sample[np.linalg.norm(sample, axis=1) < 20]
+    before = point_stats([sample], [inv(nav[0]) @ nav[1]], [inv(t0) @ t1])
+    after = point_stats([sample], [inv(poses[0]) @ poses[1]], [inv(t0) @ t1])
+    assert before.mean > 0.05
+    assert after.mean < 0.01
+
+
+def test_cloud_distance_of_a_shift():
+    rng = np.random.default_rng(5)
+    ref = rng.uniform(0, 10, (20000, 3))
+    d = cloud_distance(ref + np.array([0.0, 0.0, 0.01]), ref)
+    assert d.mean == pytest.approx(0.01, abs=1e-3)
+    assert d.below_2cm == 1.0
+    assert d.axis_mean[2] == pytest.approx(0.01, abs=1e-3)
+
+
+def _scans(rng):
+    return [
+        PosedScan(
+            rng.uniform(-5, 5, (500, 3)),
+            rng.uniform(0, 1, 500).astype(np.float32),
+            perturb(np.eye(4), rng.uniform(-10, 10, 3), rng.normal(0, 0.5, 3)),
+            f"scan_{k}",
+        )
+        for k in range(3)
+    ]
+
+
+def test_multi_scan_e57_round_trip(tmp_path):
+    scans = _scans(np.random.default_rng(6))
+    path = tmp_path / "registered.e57"
+    write_registered_e57(path, scans)
+    back = read_registered_e57(path)
+    assert [b.name for b in back] == [s.name for s in scans]
+    for a, b in zip(scans, back, strict=True):
+        np.testing.assert_allclose(b.pose, a.pose, atol=1e-9)
+        np.testing.assert_allclose(b.points, a.points, atol=1e-5)
+        np.testing.assert_allclose(b.intensity, a.intensity, atol=1e-6)
+    with pytest.raises(RegisteredIOError, match="no scans"):
+        write_registered_e57(path, [])
+
+
+def test_laz_written_in_field_and_utm(tmp_path):
+    scans = _scans(np.random.default_rng(8))
+    n = write_laz(tmp_path / "merged.laz", scans, voxel=0.0)
+    las = laspy.read(tmp_path / "merged.laz")
+    assert len(las.points) == n == 1500
+    want = np.vstack([apply(s.pose, s.points) for s in scans])
+    got = np.column_stack([las.x, las.y, las.z])
+    assert np.abs(got - want).max() <= 0.0006
+    np.testing.assert_array_equal(np.unique(las.point_source_id), [0, 1, 2])
+
+    def utm(x, y, z):
+        return x + 500000.0, y + 3700000.0, z + 200.0
+
+    write_laz(tmp_path / "utm.laz", scans, voxel=0.5, to_utm=utm, epsg=32617)
+    las = laspy.read(tmp_path / "utm.laz")
+    assert las.x.min() > 499000 and las.y.min() > 3699000
+    assert las.header.parse_crs().to_epsg() == 32617

@@ -1,0 +1,62 @@
+"""The dashboard's shell on a real Zenoh session: bad messages cost a warning, never
+the service; what it logs lands in the recording."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+
+from common import keys
+from common.clock import WallClock
+from common.messages.base import LaserScan
+from common.messages.core import Array
+from common.messages.nav import PoseEstimate
+from common.service import Context
+from common.transport import Bus
+from services.viz.config import VizConfig
+from services.viz.service import VizService
+from tests.viz import rrd
+
+
+def wait_until(pred: object, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():  # type: ignore[operator]
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_bad_messages_are_dropped_and_the_rest_is_recorded(client_bus: Bus, tmp_path: Path) -> None:
+    out = tmp_path / "live.rrd"
+    ctx = Context("viz", "test", client_bus, WallClock(), logging.getLogger("viz"), tmp_path)
+    svc = VizService(ctx, VizConfig(save=str(out), rate_hz=20.0))
+    stop = threading.Event()
+    t = threading.Thread(target=svc.run, args=(stop,))
+    t.start()
+    try:
+        lying = Array(dtype="<f4", shape=(100,), data=b"\0" * 4)
+        bad_scan = LaserScan(
+            angle_min=0, angle_max=1, angle_increment=0.01, range_min=0, range_max=5, ranges=lying
+        )
+        scans = client_bus.publisher(keys.BASE_SCAN)
+        poses = client_bus.publisher(keys.NAV_POSE)
+        client_bus.put_raw(keys.NAV_POSE.key, b"\xc1 not msgpack")
+        scans.put(bad_scan)
+        assert wait_until(lambda: "lidar" in svc.failed, 10), "bad scan never reached the tick"
+        for k in range(5):
+            poses.put(PoseEstimate(stamp_ns=time.time_ns(), x=float(k), y=1.0, yaw=0.0))
+            time.sleep(0.06)
+        assert wait_until(lambda: len(svc.trail.points) >= 2, 10), "poses not logged"
+        assert client_bus.decode_stats.by_key.get(keys.NAV_POSE.key) == 1
+        assert t.is_alive()
+    finally:
+        stop.set()
+        t.join(timeout=10)
+    assert not t.is_alive()
+    assert rrd.verify(out).returncode == 0
+    paths = rrd.entity_paths(out)
+    assert {"/robot/estimate", "/robot/trail/0000", "/robot/estimate/body"} <= paths
+    assert "/robot/estimate/lidar" not in paths
