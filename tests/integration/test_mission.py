@@ -82,7 +82,8 @@ settle_s = 1.0
 
     def scans_started(self) -> list[int]:
         return [
-            int(m) for m in re.findall(r"scanner \| .* scan (?:\S+/)?(\d+) started", self.log.read_text())
+            int(m)
+            for m in re.findall(r"scanner \| .* scan (?:\S+/)?(\d+) started", self.log.read_text())
         ]
 
 
