@@ -21,10 +21,14 @@ import numpy as np
 import numpy.typing as npt
 
 from common.field import Field
-from services.planner.raycast import _slab, cell_of, first_hit
+from services.planner.raycast import GridArgs, Table, _slab, cell_of, first_hit
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+
+# the scanner's limits as the kernels take them: (min range, max range, vertical start
+# and end, horizontal start, horizontal span), metres and degrees
+Limits = tuple[float, float, float, float, float, float]
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -37,20 +41,33 @@ def _seg_hits(b: int, ox: float, oy: float, cx: float, cy: float, boxes: F64) ->
 
 
 @nb.njit(cache=True, error_model="numpy")
+def _one_box_hides(
+    o: F64, p: int, ex0: float, ey0: float, ex1: float, ey1: float, grid: GridArgs
+) -> int:
+    """The box that the horizontal rays from o to (ex0, ey0) and to (ex1, ey1) both hit
+    first, when it is at least as tall as plot p; else -1. Under planar occlusion that
+    (convex) box cuts every line of sight between the two rays, over p's whole height."""
+    boxes = grid[0]
+    hit = -1
+    for e in range(2):
+        ex, ey = (ex0, ey0) if e == 0 else (ex1, ey1)
+        dx, dy = ex - o[0], ey - o[1]
+        d = math.sqrt(dx * dx + dy * dy)
+        if d < 1e-9:
+            return -1
+        b, _ = first_hit(o[0], o[1], o[2], dx / d, dy / d, 0.0, d * (1.0 - 1e-9) - 1e-7, grid)
+        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
+            return -1
+        hit = b
+    return hit
+
+
+@nb.njit(cache=True, error_model="numpy")
 def _plot_hidden(
     o: F64,
     p: int,
     last: int,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
+    grid: GridArgs,
 ) -> int:
     """Box that hides all of plot p under planar occlusion, or -1.
 
@@ -59,6 +76,7 @@ def _plot_hidden(
     whole wedge in front of p. ``last`` (the previous blocker) is tried first without
     casting, since far plots tend to hide behind the same near one.
     """
+    boxes = grid[0]
     cx = 0.5 * (boxes[p, 0] + boxes[p, 3]) - o[0]
     cy = 0.5 * (boxes[p, 1] + boxes[p, 4]) - o[1]
     lo, hi = math.inf, -math.inf
@@ -83,33 +101,7 @@ def _plot_hidden(
         and _seg_hits(last, o[0], o[1], ex[1], ey[1], boxes)
     ):
         return last
-    hit = -1
-    for e in range(2):
-        dx, dy = ex[e] - o[0], ey[e] - o[1]
-        d = math.sqrt(dx * dx + dy * dy)
-        b, _ = first_hit(
-            o[0],
-            o[1],
-            o[2],
-            dx / d,
-            dy / d,
-            0.0,
-            d * (1.0 - 1e-9) - 1e-7,
-            boxes,
-            x0,
-            y0,
-            bx,
-            by,
-            nx,
-            ny,
-            start,
-            items,
-            zmax,
-        )
-        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
-            return -1
-        hit = b
-    return hit
+    return _one_box_hides(o, p, ex[0], ey[0], ex[1], ey[1], grid)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -118,16 +110,7 @@ def _side_hidden(
     p: int,
     ax: int,
     plane: float,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
+    grid: GridArgs,
 ) -> bool:
     """Whether one box hides the whole vertical side ``ax``/``plane`` of plot ``p``.
 
@@ -136,39 +119,12 @@ def _side_hidden(
     (convex) box B first, B cuts every line of sight to the side; B must also be at
     least as tall as the plot so lines of sight to its top are cut too.
     """
-    hit = -1
-    for e in range(2):
-        if ax == 0:
-            ex, ey = plane, boxes[p, 1 + 3 * e]
-        else:
-            ex, ey = boxes[p, 3 * e], plane
-        dx, dy = ex - o[0], ey - o[1]
-        d = math.sqrt(dx * dx + dy * dy)
-        if d < 1e-9:
-            return False
-        b, _ = first_hit(
-            o[0],
-            o[1],
-            o[2],
-            dx / d,
-            dy / d,
-            0.0,
-            d * (1.0 - 1e-9) - 1e-7,
-            boxes,
-            x0,
-            y0,
-            bx,
-            by,
-            nx,
-            ny,
-            start,
-            items,
-            zmax,
-        )
-        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
-            return False
-        hit = b
-    return True
+    boxes = grid[0]
+    if ax == 0:
+        ex0, ey0, ex1, ey1 = plane, boxes[p, 1], plane, boxes[p, 4]
+    else:
+        ex0, ey0, ex1, ey1 = boxes[p, 0], plane, boxes[p, 3], plane
+    return _one_box_hides(o, p, ex0, ey0, ex1, ey1, grid) >= 0
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -181,33 +137,19 @@ def _sample(
     su: int,
     sv: int,
     samples: int,
-    rmin: float,
-    rmax: float,
-    vmin: float,
-    vmax: float,
-    hmin: float,
-    hspan: float,
+    lim: Limits,
     known: int,
     faces: F64,
     fint: I64,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
-    dims: I64,
-    offset: I64,
-    counts: npt.NDArray[np.int32],
-    rng: npt.NDArray[np.float32],
+    grid: GridArgs,
+    out: Table,
 ) -> int:
     """Test sample (su, sv) of face f from origin row a; ``known`` = 1 when the line of
     sight is already known to be clear (planar case), else a ray is cast. Returns the
     number of rays cast (0 or 1)."""
+    rmin, rmax, vmin, vmax, hmin, hspan = lim
+    boxes = grid[0]
+    dims, offset, counts, rng = out
     c0 = faces[f, 0]
     uu = faces[f, 1] + (su + 0.5) / samples * (faces[f, 2] - faces[f, 1])
     vv = faces[f, 3] + (sv + 0.5) / samples * (faces[f, 4] - faces[f, 3])
@@ -240,16 +182,7 @@ def _sample(
             dy,
             dz,
             dist + 1e-6,
-            boxes,
-            x0,
-            y0,
-            bx,
-            by,
-            nx,
-            ny,
-            start,
-            items,
-            zmax,
+            grid,
         )
         if hp != p:
             return 1
@@ -272,34 +205,20 @@ def _planar_side(
     s0: int,
     s1: int,
     samples: int,
-    rmin: float,
-    rmax: float,
-    vmin: float,
-    vmax: float,
-    hmin: float,
-    hspan: float,
+    lim: Limits,
     faces: F64,
     fint: I64,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
-    dims: I64,
-    offset: I64,
-    counts: npt.NDArray[np.int32],
-    rng: npt.NDArray[np.float32],
+    grid: GridArgs,
+    out: Table,
 ) -> int:
     """A vertical side under planar occlusion: one horizontal ray per column of sample
     points decides the whole column (every layer, every height sample): clear when it
     reaches plot p first, hidden when a box at least as tall as p is in the way, and
     tested sample by sample in 3D otherwise. Faces of a side come column by column,
     ``nz`` layers each. Returns the rays cast."""
+    rmin, rmax, vmin, vmax, hmin, hspan = lim
+    boxes = grid[0]
+    dims, counts, rng = out[0], out[2], out[3]
     nz = dims[p, 2]
     rays = 0
     for col in range((s1 - s0) // nz):
@@ -322,16 +241,7 @@ def _planar_side(
                 dy / d,
                 0.0,
                 d + 1e-6,
-                boxes,
-                x0,
-                y0,
-                bx,
-                by,
-                nx,
-                ny,
-                start,
-                items,
-                zmax,
+                grid,
             )
             if b >= 0 and b != p and boxes[b, 5] >= boxes[p, 5]:
                 continue  # a box as tall as p hides the whole column
@@ -348,29 +258,12 @@ def _planar_side(
                             su,
                             sw,
                             samples,
-                            rmin,
-                            rmax,
-                            vmin,
-                            vmax,
-                            hmin,
-                            hspan,
+                            lim,
                             0,
                             faces,
                             fint,
-                            boxes,
-                            x0,
-                            y0,
-                            bx,
-                            by,
-                            nx,
-                            ny,
-                            start,
-                            items,
-                            zmax,
-                            dims,
-                            offset,
-                            counts,
-                            rng,
+                            grid,
+                            out,
                         )
                 continue
             # clear line of sight at every height: only the range and field-of-view
@@ -402,34 +295,20 @@ def _planar_side(
 @nb.njit(parallel=True, cache=True, error_model="numpy")
 def exact_kernel(
     origins: F64,
-    rmin: float,
-    rmax: float,
-    vmin: float,
-    vmax: float,
-    hmin: float,
-    hspan: float,
+    lim: Limits,
     samples: int,
     cull: bool,
     faces: F64,
     fint: I64,
     side_start: I64,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
-    dims: I64,
-    offset: I64,
-    counts: npt.NDArray[np.int32],
-    rng: npt.NDArray[np.float32],
+    grid: GridArgs,
+    out: Table,
 ) -> npt.NDArray[np.int64]:
     # faces[f] = [plane, u0, u1, v0, v1]; fint[f] = [plot, cell, axis, sign]; the faces of
     # side s (= axis * 2 + (sign > 0)) of plot p are side_start[6p + s] .. [6p + s + 1]
+    rmax = lim[1]
+    boxes = grid[0]
+    counts, rng = out[2], out[3]
     k = origins.shape[0]
     nrays = np.zeros(k, dtype=np.int64)
     for a in nb.prange(k):
@@ -444,9 +323,7 @@ def exact_kernel(
             if gx * gx + gy * gy + gz * gz > rmax * rmax:
                 continue
             if cull:
-                blocker = _plot_hidden(
-                    o, p, last, boxes, x0, y0, bx, by, nx, ny, start, items, zmax
-                )
+                blocker = _plot_hidden(o, p, last, grid)
                 if blocker >= 0:
                     last = blocker
                     continue
@@ -459,13 +336,7 @@ def exact_kernel(
                 plane = boxes[p, ax + 3] if sg > 0 else boxes[p, ax]
                 if sg * (o[ax] - plane) <= 1e-9:
                     continue  # the side looks away from the scanner
-                if (
-                    cull
-                    and ax < 2
-                    and _side_hidden(
-                        o, p, ax, plane, boxes, x0, y0, bx, by, nx, ny, start, items, zmax
-                    )
-                ):
+                if cull and ax < 2 and _side_hidden(o, p, ax, plane, grid):
                     continue
                 if cull and ax < 2:
                     nrays[a] += _planar_side(
@@ -477,28 +348,11 @@ def exact_kernel(
                         s0,
                         s1,
                         samples,
-                        rmin,
-                        rmax,
-                        vmin,
-                        vmax,
-                        hmin,
-                        hspan,
+                        lim,
                         faces,
                         fint,
-                        boxes,
-                        x0,
-                        y0,
-                        bx,
-                        by,
-                        nx,
-                        ny,
-                        start,
-                        items,
-                        zmax,
-                        dims,
-                        offset,
-                        counts,
-                        rng,
+                        grid,
+                        out,
                     )
                     continue
                 for f in range(s0, s1):
@@ -513,29 +367,12 @@ def exact_kernel(
                                 su,
                                 sv,
                                 samples,
-                                rmin,
-                                rmax,
-                                vmin,
-                                vmax,
-                                hmin,
-                                hspan,
+                                lim,
                                 0,
                                 faces,
                                 fint,
-                                boxes,
-                                x0,
-                                y0,
-                                bx,
-                                by,
-                                nx,
-                                ny,
-                                start,
-                                items,
-                                zmax,
-                                dims,
-                                offset,
-                                counts,
-                                rng,
+                                grid,
+                                out,
                             )
     return nrays
 

@@ -21,6 +21,13 @@ I64 = npt.NDArray[np.int64]
 
 _PAR = 1e-12
 
+# What the kernels take, as one argument each (numba passes tuples by value, at no
+# cost): the binned boxes, ``BoxGrid.args``; and the visibility table being filled,
+# (dims, offset, counts, rng) with ``Field.cell_dims``, ``Field.cell_offset`` and the
+# per-candidate hit counts and nearest ranges.
+GridArgs = tuple[F64, float, float, float, float, int, int, I64, I64, float]
+Table = tuple[I64, I64, npt.NDArray[np.int32], npt.NDArray[np.float32]]
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class BoxGrid:
@@ -37,6 +44,22 @@ class BoxGrid:
     start: I64
     items: I64
     zmax: float
+
+    @property
+    def args(self) -> GridArgs:
+        """The grid as the numba kernels take it."""
+        return (
+            self.boxes,
+            self.x0,
+            self.y0,
+            self.bx,
+            self.by,
+            self.nx,
+            self.ny,
+            self.start,
+            self.items,
+            self.zmax,
+        )
 
 
 def build_grid(boxes: F64) -> BoxGrid:
@@ -110,19 +133,11 @@ def first_hit(
     dy: float,
     dz: float,
     tmax: float,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
+    grid: GridArgs,
 ) -> tuple[int, float]:
     """Index of the first box hit by o + t d for t in [0, tmax], and its t; (-1, inf)
     when the ray reaches tmax or the ground first."""
+    boxes, x0, y0, bx, by, nx, ny, start, items, zmax = grid
     if dz < 0.0:
         tmax = min(tmax, -oz / dz)
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
@@ -193,16 +208,7 @@ def _cast_many(
     origins: F64,
     dirs: F64,
     tmax: F64,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
+    grid: GridArgs,
 ) -> tuple[I64, F64]:
     n = origins.shape[0]
     hit = np.empty(n, dtype=np.int64)
@@ -218,16 +224,7 @@ def _cast_many(
             d[1],
             d[2],
             tmax[r],
-            boxes,
-            x0,
-            y0,
-            bx,
-            by,
-            nx,
-            ny,
-            start,
-            items,
-            zmax,
+            grid,
         )
         hit[r] = h
         ts[r] = t
@@ -242,7 +239,4 @@ def cast(grid: BoxGrid, origins: F64, dirs: F64, tmax: float | F64 = math.inf) -
     if o.shape != d.shape:
         raise ValueError(f"origins {o.shape} and dirs {d.shape} differ in shape")
     tm = np.broadcast_to(np.asarray(tmax, dtype=np.float64), (len(o),)).copy()
-    g = grid
-    return _cast_many(
-        o, d, tm, g.boxes, g.x0, g.y0, g.bx, g.by, g.nx, g.ny, g.start, g.items, g.zmax
-    )
+    return _cast_many(o, d, tm, grid.args)

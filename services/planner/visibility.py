@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from common.field import Field, ScannerModel
 from services.planner.exact import exact_kernel, exposed_faces
-from services.planner.raycast import build_grid, cell_of, first_hit
+from services.planner.raycast import GridArgs, Table, build_grid, cell_of, first_hit
 
 log = logging.getLogger(__name__)
 
@@ -87,30 +87,18 @@ def _grid_kernel(
     dirs: F64,
     rmin: float,
     rmax: float,
-    boxes: F64,
-    x0: float,
-    y0: float,
-    bx: float,
-    by: float,
-    nx: int,
-    ny: int,
-    start: I64,
-    items: I64,
-    zmax: float,
-    dims: I64,
-    offset: I64,
-    counts: npt.NDArray[np.int32],
-    rng: npt.NDArray[np.float32],
+    grid: GridArgs,
+    out: Table,
 ) -> None:
+    boxes = grid[0]
+    dims, offset, counts, rng = out
     for a in nb.prange(origins.shape[0]):
         counts[a, :] = 0
         rng[a, :] = np.inf
         ox, oy, oz = origins[a, 0], origins[a, 1], origins[a, 2]
         for r in range(dirs.shape[0]):
             dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-            p, t = first_hit(
-                ox, oy, oz, dx, dy, dz, rmax, boxes, x0, y0, bx, by, nx, ny, start, items, zmax
-            )
+            p, t = first_hit(ox, oy, oz, dx, dy, dz, rmax, grid)
             if p >= 0 and t >= rmin:
                 c = cell_of(p, ox + t * dx, oy + t * dy, oz + t * dz, boxes, dims, offset)
                 counts[a, c] += 1
@@ -150,7 +138,6 @@ def compute_visibility(
     g = build_grid(field.plot_boxes)
     n, nc = field.n_candidates, field.n_cells
     origins = np.column_stack([field.cand_xy, np.full(n, scanner.height)])
-    args = (g.boxes, g.x0, g.y0, g.bx, g.by, g.nx, g.ny, g.start, g.items, g.zmax)
     if mode == "grid":
         dirs = grid_directions(scanner, step_deg)
     else:
@@ -173,39 +160,20 @@ def compute_visibility(
     for s, e in chunks:
         o = np.ascontiguousarray(origins[s:e])
         counts, rng = buf_c[: e - s], buf_r[: e - s]
+        table = (field.cell_dims, field.cell_offset, counts, rng)
         if mode == "grid":
-            _grid_kernel(
-                o,
-                dirs,
-                scanner.min_range,
-                scanner.max_range,
-                *args,
-                field.cell_dims,
-                field.cell_offset,
-                counts,
-                rng,
-            )
+            _grid_kernel(o, dirs, scanner.min_range, scanner.max_range, g.args, table)
             rays += len(o) * len(dirs)
         else:
-            nr = exact_kernel(
-                o,
+            limits = (
                 scanner.min_range,
                 scanner.max_range,
                 scanner.vertical_start_deg,
                 scanner.vertical_end_deg,
                 scanner.horizontal_start_deg,
                 hspan,
-                samples,
-                cull,
-                faces,
-                fint,
-                side_start,
-                *args,
-                field.cell_dims,
-                field.cell_offset,
-                counts,
-                rng,
             )
+            nr = exact_kernel(o, limits, samples, cull, faces, fint, side_start, g.args, table)
             rays += int(nr.sum())
         ci, ki = np.nonzero(counts)
         out_c.append(ci.astype(np.int64) + s)
