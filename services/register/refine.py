@@ -72,6 +72,11 @@ class RefineConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     # floor of the point-to-plane residual sigma that scales the pair information
     # (the pair's own RMSE is used when larger)
     point_sigma: Pos = 0.01
+    # residuals on plants are correlated over a plant, not independent per point: the
+    # pair information counts one point per cube of this size (0: every point), so a
+    # pair of 20 000 points is not trusted to a fraction of a millimetre and cannot
+    # override the navigation prior with its own bias (the field's cell size)
+    independent_voxel: Annotated[float, msgspec.Meta(ge=0)] = 0.5
     nav_sigma_xy: Pos = 0.02
     nav_sigma_z: Pos = 0.05
     nav_sigma_tilt_deg: Pos = 0.1
@@ -151,16 +156,25 @@ def _common_view(scan: Prepared, other_origin: F64, cfg: RefineConfig) -> _Subse
 
 
 def pair_information(
-    tgt_kd: cKDTree, tgt_normals: F64, src_in_tgt: F64, max_dist: float, sigma: float
+    tgt_kd: cKDTree,
+    tgt_normals: F64,
+    src_in_tgt: F64,
+    max_dist: float,
+    sigma: float,
+    voxel: float = 0.0,
 ) -> F64:
     """Point-to-plane information (6x6, rotation then translation, target frame) of
     the correspondences between source points already in the target frame and the
-    target: sum of J^T J / sigma^2 with J = [p x n, n]."""
+    target: sum of J^T J / sigma^2 with J = [p x n, n], scaled by the share of
+    distinct ``voxel`` cubes among the points (one independent residual per cube)."""
     d, k = tgt_kd.query(src_in_tgt, distance_upper_bound=max_dist)
     ok = np.isfinite(d)
     p, n = src_in_tgt[ok], tgt_normals[k[ok]]
     jac = np.column_stack([np.cross(p, n), n])
     out: F64 = jac.T @ jac / sigma**2
+    if voxel > 0 and len(p):
+        n_eff = len(np.unique(np.floor(p / voxel).astype(np.int64), axis=0))
+        out *= n_eff / len(p)
     return out
 
 
@@ -210,7 +224,9 @@ def align_pair(
             names = ("x", "y", "z", "roll", "pitch", "yaw")
             reason = f"{names[worst]} correction is {abs(corr[worst]):.1f} nav sigmas"
     sigma = max(cfg.point_sigma, rmse) if math.isfinite(rmse) else cfg.point_sigma
-    info = pair_information(tgt.kd, tgt.normals, moved, cfg.fine_correspondence, sigma)
+    info = pair_information(
+        tgt.kd, tgt.normals, moved, cfg.fine_correspondence, sigma, cfg.independent_voxel
+    )
     return PairResult(i, j, t, info, overlap, rmse, not reason, reason)
 
 

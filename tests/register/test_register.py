@@ -3,6 +3,7 @@ import math
 import laspy
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from common.field import load_field
 from common.geo import rot_zyx
@@ -27,6 +28,7 @@ from services.register.refine import (
     RefineConfig,
     TargetObservation,
     optimise_graph,
+    pair_information,
     prepare,
     prior_sigmas,
     refine,
@@ -164,6 +166,33 @@ def test_refinement_restores_a_perturbed_pair(lane_scans):
     after = point_stats([sample], [inv(poses[0]) @ poses[1]], [inv(t0) @ t1])
     assert before.mean > 0.05
     assert after.mean < 0.01
+
+
+def test_pair_information_counts_a_denser_scan_of_the_same_surface_once():
+    """Sampling the same surfaces ten times more densely adds no independent evidence:
+    with independent_voxel the information stays put, without it it grows tenfold."""
+    rng = np.random.default_rng(2)
+
+    def corner(n):  # three orthogonal 4 m walls, so all six directions are constrained
+        u = rng.uniform(0, 4, (n, 2))
+        pts = np.vstack(
+            [np.c_[u, np.zeros(n)], np.c_[u[:, 0], np.zeros(n), u[:, 1]], np.c_[np.zeros(n), u]]
+        )
+        nrm = np.repeat(np.eye(3)[::-1], n, axis=0)
+        return pts, nrm
+
+    tgt, nrm = corner(20000)
+    kd = cKDTree(tgt)
+    sparse, dense = corner(2000)[0], corner(20000)[0]
+    for voxel, ratio in ((0.5, 1.0), (0.0, 10.0)):
+        i_sparse = pair_information(kd, nrm, sparse, 0.1, 0.01, voxel)
+        i_dense = pair_information(kd, nrm, dense, 0.1, 0.01, voxel)
+        assert np.trace(i_dense) / np.trace(i_sparse) == pytest.approx(ratio, rel=0.05)
+    # about 64 cubes per wall (fewer where walls share cubes at their edges): with the
+    # rotation held, a shift along a wall's normal is known to about sigma / 8, not
+    # sigma / sqrt(20000)
+    info = pair_information(kd, nrm, dense, 0.1, 0.01, 0.5)
+    assert info[3, 3] ** -0.5 == pytest.approx(0.01 / 8, rel=0.1)
 
 
 def test_cloud_distance_of_a_shift():
