@@ -218,7 +218,7 @@ def _planar_side(
     ``nz`` layers each. Returns the rays cast."""
     rmin, rmax, vmin, vmax, hmin, hspan = lim
     boxes = grid[0]
-    dims, counts, rng = out[0], out[2], out[3]
+    dims, _, counts, rng = out
     nz = dims[p, 2]
     rays = 0
     for col in range((s1 - s0) // nz):
@@ -308,7 +308,7 @@ def exact_kernel(
     # side s (= axis * 2 + (sign > 0)) of plot p are side_start[6p + s] .. [6p + s + 1]
     rmax = lim[1]
     boxes = grid[0]
-    counts, rng = out[2], out[3]
+    _, _, counts, rng = out
     k = origins.shape[0]
     nrays = np.zeros(k, dtype=np.int64)
     for a in nb.prange(k):
