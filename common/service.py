@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import faulthandler
 import logging
 import os
 import signal
@@ -45,6 +46,10 @@ log = logging.getLogger("phenorover")
 
 EXIT_CONFIG = 2
 EXIT_ZENOH = 3
+# A service still running this long after SIGTERM/SIGINT writes every thread's stack
+# to stderr (its log) and exits: the launcher SIGKILLs at 4 s, and a stack says where
+# it hung where a kill says nothing.
+STOP_DEADLINE_S = 3.5
 
 
 class Service(Protocol):
@@ -148,6 +153,8 @@ def main(
 
     def on_signal(signum: int, _frame: object) -> None:
         log.info("%s: received %s, stopping", name, signal.Signals(signum).name)
+        if not stop.is_set():
+            faulthandler.dump_traceback_later(STOP_DEADLINE_S, exit=True)
         stop.set()
 
     signal.signal(signal.SIGTERM, on_signal)

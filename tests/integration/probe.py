@@ -3,12 +3,14 @@
 - talker: publishes ``count`` Blobs of ``size`` bytes on a bulk topic, then idles;
   serves an Echo RPC (which rejects text "bad" with a RequestError).
 - listener: checks each Blob's digest and reports it on ``test/received``.
+- ``hang_on_stop``: never returns from ``run`` (a service stuck in its shutdown).
 """
 
 from __future__ import annotations
 
 import hashlib
 import threading
+import time
 from typing import Annotated, Literal
 
 import msgspec
@@ -45,6 +47,7 @@ class ProbeConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     size: Annotated[int, msgspec.Meta(ge=0)] = 1000
     count: Annotated[int, msgspec.Meta(ge=0)] = 0
     period_s: float = 0.2
+    hang_on_stop: bool = False
 
 
 class Probe:
@@ -75,6 +78,8 @@ class Probe:
                     return
                 self.pub.put(Blob(seq=seq, digest=digest, data=data))
         stop.wait()
+        while self.cfg.hang_on_stop:
+            time.sleep(1.0)
 
 
 if __name__ == "__main__":

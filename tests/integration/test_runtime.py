@@ -13,6 +13,7 @@ import pytest
 from common import keys
 from common.cli import wait_alive
 from common.messages.system import Health
+from common.service import STOP_DEADLINE_S
 from common.status import query_alive
 from common.transport import Bus, RpcError, RpcTimeout
 from tests.conftest import Procs
@@ -88,6 +89,21 @@ def test_liveliness_seen_and_lost_when_killed(
     deadline = time.monotonic() + 15
     while any(a.pid == p.pid for a in query_alive(client_bus.session, timeout=1.0)):
         assert time.monotonic() < deadline, "token of a killed process still alive"
+
+
+def test_a_service_stuck_in_its_shutdown_dumps_its_stacks_and_exits(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    log = tmp_path / "probe.log"
+    p = procs.service(PROBE, router_endpoint, "--set", "hang_on_stop=true", log=log)
+    assert wait_alive(client_bus.session, {"probe"}, timeout=20)
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGTERM)
+    rc = p.wait(timeout=10)
+    took = time.monotonic() - t0
+    assert rc != 0 and STOP_DEADLINE_S <= took < STOP_DEADLINE_S + 3, (rc, took)
+    text = log.read_text()
+    assert "Timeout" in text and "probe.py" in text, text[-2000:]  # where it hung
 
 
 def test_bad_messages_are_logged_once_counted_and_dropped(
