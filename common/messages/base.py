@@ -6,7 +6,14 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Array, Message, NonNegative
+from common.messages.core import (
+    Angle,
+    Array,
+    Coordinate,
+    Message,
+    NonNegative,
+    Velocity,
+)
 
 # Hard bounds a command must satisfy to be accepted at all; the base's own limits
 # (Husky A200: 1.0 m/s) are applied on top in its config.
@@ -24,11 +31,11 @@ class Twist(Message, frozen=True, kw_only=True):
 class Odometry(Message, frozen=True, kw_only=True):
     """Wheel odometry: pose of base_link in ``odom`` (metres, radians) and body rates."""
 
-    x: float
-    y: float
-    yaw: float
-    v: float
-    w: float
+    x: Coordinate
+    y: Coordinate
+    yaw: Angle
+    v: Velocity
+    w: Velocity
     # variances of the increments per metre travelled / per radian turned
     var_v: NonNegative = 0.0
     var_w: NonNegative = 0.0
@@ -37,9 +44,9 @@ class Odometry(Message, frozen=True, kw_only=True):
 class LaserScan(Message, frozen=True, kw_only=True):
     """A planar scan (sensor_msgs/LaserScan): ``ranges`` float32 metres, inf = no return."""
 
-    angle_min: float
-    angle_max: float
-    angle_increment: float
+    angle_min: Angle
+    angle_max: Angle
+    angle_increment: Angle
     range_min: NonNegative
     range_max: NonNegative
     ranges: Array
@@ -57,4 +64,4 @@ class BaseStatus(Message, frozen=True, kw_only=True):
 
     stopped_by_watchdog: bool
     estop: bool
-    battery_v: float = 0.0
+    battery_v: NonNegative = 0.0

@@ -7,19 +7,46 @@ Conventions (see README, "Messages"):
 - units are SI (metres, radians, seconds) unless a field name says otherwise;
 - new fields get defaults and go at the end, so old decoders keep working
   (unknown fields are ignored when decoding messages, unlike configs);
-- arrays travel as :class:`Array` (dtype, shape, raw bytes).
+- arrays travel as :class:`Array` (dtype, shape, raw bytes);
+- every float is finite by schema: a NaN or an infinity fails decoding like any
+  other out-of-range value (the aliases below; ``tests/common/test_messages_finite.py``
+  checks every field of every message on the bus).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Any
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+# msgspec checks bounds on decode only, by comparison, and NaN fails every comparison:
+# so a lower *and* an upper bound on a float refuse NaN, +inf and -inf alike. 1e300
+# lets every real value through.
+FINITE_MAX = 1e300
+#: Any finite float.
+Finite = Annotated[float, msgspec.Meta(ge=-FINITE_MAX, le=FINITE_MAX)]
+#: A finite float >= 0 (variances, durations, distances).
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=FINITE_MAX)]
+#: A finite float > 0.
+Positive = Annotated[float, msgspec.Meta(gt=0.0, le=FINITE_MAX)]
 Probability = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+#: An angle in radians within two turns either way: every producer wraps to
+#: (-pi, pi]; the slack lets through one that wraps late, not garbage.
+Angle = Annotated[float, msgspec.Meta(ge=-4.0 * math.pi, le=4.0 * math.pi)]
+#: A body speed, m/s or rad/s: the robot does 1 m/s and 2 rad/s, nothing on the
+#: ground does 100.
+Velocity = Annotated[float, msgspec.Meta(ge=-100.0, le=100.0)]
+#: A coordinate in a local frame (``map``, ``field``, ``odom``), metres: within
+#: 10,000 km of the frame's origin, a quarter of the way round the earth.
+Coordinate = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]
+#: WGS84 degrees and metres above the ellipsoid (the earth's surface spans about
+#: -500 m to 9 km; the slack covers aircraft and a bad geoid model, not garbage).
+Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]
 #: A name that becomes a folder or file name on another machine (a mission, a scan
 #: project): letters, digits, ``._-``, not starting with a dot, at most 64; or empty.
 FileName = Annotated[str, msgspec.Meta(pattern=r"^([A-Za-z0-9_-][A-Za-z0-9._-]{0,63})?$")]
@@ -77,15 +104,15 @@ class Array(msgspec.Struct, frozen=True):
 class Vector3(msgspec.Struct, frozen=True):
     """A 3-vector in metres (or m/s, rad/s, by context)."""
 
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
+    x: Finite = 0.0
+    y: Finite = 0.0
+    z: Finite = 0.0
 
 
 class Pose2D(msgspec.Struct, frozen=True):
     """A planar pose: position in metres, ``yaw`` in radians (REP-103: 0 along +x,
     counter-clockwise positive), in the frame of the enclosing message."""
 
-    x: float = 0.0
-    y: float = 0.0
-    yaw: float = 0.0
+    x: Coordinate = 0.0
+    y: Coordinate = 0.0
+    yaw: Angle = 0.0

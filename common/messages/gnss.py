@@ -7,7 +7,15 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Message, NonNegative
+from common.messages.core import (
+    Altitude,
+    Angle,
+    Finite,
+    Latitude,
+    Longitude,
+    Message,
+    NonNegative,
+)
 
 
 class FixType(enum.IntEnum):
@@ -27,16 +35,17 @@ class FixType(enum.IntEnum):
 class NavSatFix(Message, frozen=True, kw_only=True):
     """One antenna's position in WGS84 (degrees, metres above the ellipsoid).
 
-    ``position_covariance`` is row-major 3x3 in ENU metres^2 at the antenna, as in ROS.
+    ``position_covariance`` is row-major 3x3 in ENU metres^2 at the antenna, as in ROS
+    (finite by schema; whether it is a covariance at all, its consumer checks).
     ``frame_id`` is the antenna frame (``gnss_1``, ``gnss_2``).
     """
 
     antenna: Annotated[int, msgspec.Meta(ge=1, le=2)]
-    latitude: Annotated[float, msgspec.Meta(ge=-90, le=90)]
-    longitude: Annotated[float, msgspec.Meta(ge=-180, le=180)]
-    altitude: float
+    latitude: Latitude
+    longitude: Longitude
+    altitude: Altitude
     fix_type: FixType
-    position_covariance: tuple[float, ...] = (0.0,) * 9
+    position_covariance: tuple[Finite, ...] = (0.0,) * 9
     num_satellites: int = 0
     hdop: NonNegative = 0.0
 
@@ -49,7 +58,7 @@ class GnssHeading(Message, frozen=True, kw_only=True):
     disagrees with the mounted one.
     """
 
-    yaw: float
+    yaw: Angle
     yaw_sd: NonNegative
     baseline_m: NonNegative
     valid: bool

@@ -10,10 +10,10 @@ from typing import Annotated, Literal
 import msgspec
 
 from common.field import FieldLayout, ScannerModel
-from common.messages.core import Array, Message
+from common.messages.core import Array, Coordinate, Finite, Message, NonNegative, Positive
 from common.messages.nav import Leg
 
-Seconds = Annotated[float, msgspec.Meta(gt=0)]
+Seconds = Positive
 
 
 class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -47,8 +47,8 @@ class Candidate(msgspec.Struct, frozen=True, kw_only=True):
     """A candidate scan location: lane intersection (row-gap lane, cross lane)."""
 
     id: int
-    x: float
-    y: float
+    x: Coordinate
+    y: Coordinate
     row_lane: int
     cross_lane: int
     cells_seen: int
@@ -66,9 +66,9 @@ class CoverSummary(msgspec.Struct, frozen=True, kw_only=True):
     cells_target: int
     cells_covered: int
     status: str
-    bound: float | None
-    gap: float | None
-    time_s: float
+    bound: Finite | None
+    gap: Finite | None
+    time_s: NonNegative
 
 
 class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
@@ -78,13 +78,13 @@ class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
 
     nav: str
     order: list[int]
-    length: float
+    length: NonNegative
     method: str
     status: str
-    nn_length: float
+    nn_length: NonNegative
     nn_order: list[int]
-    length_by_nav: dict[str, float]
-    time_s: float
+    length_by_nav: dict[str, NonNegative]
+    time_s: NonNegative
 
 
 class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
@@ -92,8 +92,8 @@ class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
     rays: int
     pairs: int
     cells_seen_by_none: int
-    median_nearest_range: float
-    time_s: float
+    median_nearest_range: NonNegative
+    time_s: NonNegative
 
 
 class PlanResult(Message, frozen=True, kw_only=True):
@@ -104,7 +104,7 @@ class PlanResult(Message, frozen=True, kw_only=True):
     layout: FieldLayout
     scanner: ScannerModel
     options: PlanOptions
-    origin: tuple[float, float]
+    origin: tuple[Coordinate, Coordinate]
     plot_boxes: Array
     candidates: list[Candidate]
     selected: list[int]
@@ -112,7 +112,7 @@ class PlanResult(Message, frozen=True, kw_only=True):
     cover: CoverSummary
     tour: TourSummary
     legs: list[Leg]
-    timings: dict[str, float]
+    timings: dict[str, NonNegative]
 
 
 class PlanRequest(Message, frozen=True, kw_only=True):

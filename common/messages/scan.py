@@ -7,7 +7,7 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import FileName, Message
+from common.messages.core import Angle, FileName, Message, Probability
 
 
 class ScanProfile(msgspec.Struct, frozen=True, kw_only=True):
@@ -59,8 +59,8 @@ class ScannerStatus(Message, frozen=True, kw_only=True):
 
     state: ScannerState
     scan_id: int = 0
-    progress: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
+    progress: Probability = 0.0
     error: str = ""
     file: str = ""
-    pitch: float = 0.0
-    roll: float = 0.0
+    pitch: Angle = 0.0
+    roll: Angle = 0.0

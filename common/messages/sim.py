@@ -7,7 +7,13 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Message
+from common.messages.core import (
+    Angle,
+    Coordinate,
+    Message,
+    NonNegative,
+    Velocity,
+)
 
 
 class SimClock(Message, frozen=True, kw_only=True):
@@ -18,44 +24,46 @@ class SimClock(Message, frozen=True, kw_only=True):
     """
 
     sim_ns: Annotated[int, msgspec.Meta(ge=0)]
-    real_time_factor: Annotated[float, msgspec.Meta(gt=0)] = 1.0
+    # the simulator's own config caps it at 1000; a follower that received 1e6 would
+    # believe the world may run a million times faster than the wall clock
+    real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1e6)] = 1.0
 
 
 class TruthPose(Message, frozen=True, kw_only=True):
     """The robot's true pose (base_link in the ``field`` frame): metres and radians,
     ZYX Euler angles (yaw about z, then pitch, then roll)."""
 
-    x: float
-    y: float
-    z: float
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    v: float = 0.0
-    w: float = 0.0
+    x: Coordinate
+    y: Coordinate
+    z: Coordinate
+    roll: Angle = 0.0
+    pitch: Angle = 0.0
+    yaw: Angle = 0.0
+    v: Velocity = 0.0
+    w: Velocity = 0.0
 
 
 class SimAntennas(Message, frozen=True, kw_only=True):
     """True phase-centre positions of both GNSS antennas in the ``field`` frame
     (metres): what the simulated receivers measure, before their error model."""
 
-    p1: tuple[float, float, float]
-    p2: tuple[float, float, float]
+    p1: tuple[Coordinate, Coordinate, Coordinate]
+    p2: tuple[Coordinate, Coordinate, Coordinate]
 
 
 class SimWheelCommand(Message, frozen=True, kw_only=True):
     """What the simulated base's motor controller is asked for: body velocities
     (m/s, rad/s) the wheels are driven to, before slip."""
 
-    v: float
-    w: float
+    v: Velocity
+    w: Velocity
 
 
 class SimEncoders(Message, frozen=True, kw_only=True):
     """Body velocities as the wheel encoders see them (m/s, rad/s): blind to slip."""
 
-    v: float
-    w: float
+    v: Velocity
+    w: Velocity
 
 
 class RenderRequest(Message, frozen=True, kw_only=True):
@@ -73,6 +81,6 @@ class RenderReply(Message, frozen=True, kw_only=True):
 
     path: str
     points: int
-    pitch: float
-    roll: float
-    render_s: float
+    pitch: Angle
+    roll: Angle
+    render_s: NonNegative

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import msgspec
+
 from common.messages.core import Message, NonNegative
 
 
@@ -10,6 +12,11 @@ class Health(Message, frozen=True, kw_only=True):
 
     ``decode_errors`` counts messages (and requests) that failed to decode and were
     dropped since start; ``last_error`` is the latest such failure, one line.
+    ``callback_errors`` counts messages that decoded but whose subscriber callback
+    raised, and requests whose handler raised anything but a RequestError (answered
+    as internal errors): each is a bug or input the service could not take, and the
+    service lives on, so this count is where it shows. ``counters``: the service's
+    own counts of input it refused or recovered from (``Bus.report``), by name.
     """
 
     service: str
@@ -18,6 +25,8 @@ class Health(Message, frozen=True, kw_only=True):
     uptime_s: NonNegative
     decode_errors: int = 0
     last_error: str = ""
+    callback_errors: int = 0
+    counters: dict[str, int] = msgspec.field(default_factory=dict)
 
 
 class Ping(Message, frozen=True, kw_only=True):

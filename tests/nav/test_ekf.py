@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from common.geo import wrap_angle
 from services.nav.ekf import EkfConfig, Localizer
@@ -182,3 +183,177 @@ def test_height_follows_the_antennas_and_rejects_a_jump() -> None:
     assert not accepted[400] and sum(accepted) >= 595
     assert abs(loc.z - 0.30) < 0.01
     assert math.sqrt(loc.var_z) < 0.01
+
+
+# --- bad data, well-typed or not -------------------------------------------------
+
+
+def converged(seed: int = 0, seconds: float = 10.0) -> tuple[Localizer, float]:
+    """A filter localized on a robot standing at the origin facing +x; its time."""
+    loc = Localizer(EkfConfig())
+    rng = np.random.default_rng(seed)
+    t = 0.0
+    for k in range(int(seconds / 0.02)):
+        t = k * 0.02
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        if k % 5 == 0:
+            good_fixes(loc, t, rng, 0.0, 0.0)
+    assert loc.localized()
+    return loc, t
+
+
+def good_fixes(loc: Localizer, t: float, rng: np.random.Generator, x: float, y: float) -> None:
+    for lever in (LEVER1, LEVER2):
+        z = antenna(x, y, 0.0, lever) + rng.normal(0, SIG, 2)
+        loc.update_antenna(t, z, np.eye(2) * SIG**2, lever)
+    loc.update_heading(t, float(rng.normal(0, 0.0104)), 0.0104)
+
+
+def assert_finite(loc: Localizer) -> None:
+    assert np.isfinite(loc.x).all() and np.isfinite(loc.P).all(), (loc.x, loc.P)
+    assert math.isfinite(loc.z) and not math.isnan(loc.var_z)
+
+
+def test_a_stream_of_absurd_measurements_is_refused_counted_and_harmless() -> None:
+    loc, t = converged()
+    rng = np.random.default_rng(1)
+    nan, inf = math.nan, math.inf
+    absurd_fixes = [
+        (np.array([nan, 0.0]), np.eye(2) * 1e-4),
+        (np.array([inf, 0.0]), np.eye(2) * 1e-4),
+        (np.array([0.0, 0.0]), np.eye(2) * nan),
+        (np.array([0.0, 0.0]), np.zeros((2, 2))),  # an unfilled covariance
+        (np.array([0.0, 0.0]), -np.eye(2)),
+        (np.array([0.0, 0.0]), np.array([[1.0, 2.0], [2.0, 1.0]])),  # not PSD
+        (np.array([0.0, 0.0]), np.array([[1.0, 0.5], [0.0, 1.0]])),  # not symmetric
+        (np.array([1e300, -1e300]), np.eye(2)),
+    ]
+    before = loc.rejected
+    sent = 0
+    for k in range(1, 1001):  # 20 s more of standing, bad data at 50 Hz beside it
+        t += 0.02
+        assert loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        xy, cov = absurd_fixes[k % len(absurd_fixes)]
+        far = rng.uniform(-1e6, 1e6, 2)  # far away and never twice in the same place
+        results = [
+            loc.update_antenna(t, xy, cov, LEVER1),
+            loc.update_antenna(t, far, np.eye(2) * 1e-30, LEVER2),
+            loc.update_heading(t, [nan, inf, 3.0, 1e9][k % 4], [0.01, 0.01, 1e-30, 0.01][k % 4]),
+            loc.update_heading(t, 0.3, [0.0, -1.0, nan, inf][k % 4]),
+            loc.update_odometry(
+                t, [nan, 1e3, 0.0, 0.0][k % 4], 0.0, [0.0, 0.0, -1.0, nan][k % 4], 0.0
+            ),
+            loc.update_height(t, [nan, 1e9, 0.0, 0.0][k % 4], [1e-4, 1e-4, 0.0, inf][k % 4]),
+            loc.update_antenna(t + [nan, 1e9, -1e9, inf][k % 4], np.zeros(2), np.eye(2), LEVER1),
+        ]
+        sent += len(results)
+        assert not any(results), (k, results)
+        assert_finite(loc)
+        if k % 5 == 0:
+            good_fixes(loc, t, rng, 0.0, 0.0)
+    assert loc.rejected - before == sent
+    c = loc.counters
+    assert c.rejected_by["invalid"] > 0 and c.rejected_by["stamp"] > 0 and c.rejected_by["gate"] > 0
+    assert c.resets == 0, c.resets_by  # nothing in that stream agreed with itself
+    assert loc.localized() and math.hypot(loc.x[0], loc.x[1]) < 0.01
+    assert c.last_reason
+
+
+def test_a_stream_of_consistent_far_fixes_is_followed_in_the_end_and_said(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A filter cannot tell a receiver that agrees with itself from the truth: after
+    ``reset_after`` in a row it follows them, finitely, and says so once."""
+    loc, t = converged()
+    for _ in range(30):
+        t += 0.1
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        for lever in (LEVER1, LEVER2):
+            loc.update_antenna(t, antenna(1e6, 0.0, 0.0, lever), np.eye(2) * 1e-30, lever)
+        assert_finite(loc)
+    assert loc.counters.resets_by.get("relocalized", 0) >= 1
+    assert abs(loc.x[0] - 1e6) < 1.0
+    said = [r for r in caplog.records if "re-initialised" in r.getMessage()]
+    assert 1 <= len(said) <= 2, said  # once, not once per fix
+
+
+def test_a_genuine_10_m_relocalisation_after_a_long_outage_is_accepted() -> None:
+    """The robot is towed 10 m during a 2-minute GNSS outage (its wheels never turn):
+    the first fixes after it are far outside the confident filter's gate, but they
+    agree with each other, so the filter re-localises on them within a second."""
+    loc, t = converged()
+    rng = np.random.default_rng(2)
+    for _ in range(6000):  # 120 s of odometry alone
+        t += 0.02
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+    assert loc.position_sigma() < 1.0  # still sure of itself: 10 m is beyond its gate
+    accepted_at = None
+    for k in range(1, 601):  # the fixes come back, at the truth
+        t += 0.02
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        if k % 5 == 0:
+            good_fixes(loc, t, rng, 10.0, 0.0)
+        if accepted_at is None and abs(loc.x[0] - 10.0) < 0.05:
+            accepted_at = k * 0.02
+        assert_finite(loc)
+    assert accepted_at is not None and accepted_at <= 1.5, accepted_at
+    assert loc.counters.resets_by.get("relocalized", 0) >= 1
+    assert loc.localized() and abs(loc.x[0] - 10.0) < 0.01 and abs(loc.x[1]) < 0.01
+    assert abs(wrap_angle(loc.x[2])) < math.radians(1.0)
+
+
+def test_a_non_finite_state_resets_to_not_localized_and_the_next_fixes_recover() -> None:
+    loc, t = converged()
+    p = loc.P
+    p[0, 0] = math.nan  # what an overflow somewhere once did, for good
+    loc.kf.P = p
+    loc.predict(t + 0.02)
+    assert loc.counters.resets_by == {"nonfinite": 1}
+    assert not loc.initialized and not loc.localized()
+    assert_finite(loc)
+    rng = np.random.default_rng(3)
+    for k in range(2, 500):  # the next fixes initialise it again
+        t += 0.02
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        if k % 5 == 0:
+            good_fixes(loc, t, rng, 0.0, 0.0)
+    assert loc.localized() and math.hypot(loc.x[0], loc.x[1]) < 0.01
+    assert loc.counters.resets_by == {"nonfinite": 1}
+
+
+def test_stamps_from_another_clock_are_refused_and_the_callers_clock_wins() -> None:
+    loc = Localizer(EkfConfig())
+    # the very first measurement comes from far in the future: nothing to compare with
+    assert loc.update_odometry(1e9, 0.0, 0.0, 1e-4, 4e-4)
+    # the service's own clock (its control loop) puts the filter back on its time
+    loc.predict(100.0)
+    assert loc.t == 100.0 and loc.counters.resets_by == {"time": 1}
+    assert not loc.update_odometry(1e9 + 1, 0.0, 0.0, 1e-4, 4e-4)
+    assert loc.counters.rejected_by == {"stamp": 1} and loc.t == 100.0
+    assert loc.update_odometry(100.02, 0.0, 0.0, 1e-4, 4e-4)
+    # a stream ahead that agrees with itself moves the filter's time (its clock was
+    # not advanced for a while: no control loop here)
+    for k in range(EkfConfig().reset_after):
+        loc.update_odometry(5000.0 + 0.02 * k, 0.0, 0.0, 1e-4, 4e-4)
+    assert loc.t is not None and loc.t > 5000.0
+    assert loc.counters.resets_by == {"time": 2}
+    # a stale one never does: only the caller's clock moves the filter's time back
+    for k in range(100):
+        assert not loc.update_odometry(0.02 * k, 0.0, 0.0, 1e-4, 4e-4)
+    assert loc.t > 5000.0 and loc.counters.resets_by == {"time": 2}
+
+
+def test_absurd_fixes_before_initialisation_never_leave_an_implausible_state() -> None:
+    """Before a heading nothing is gated, and a late fix pulls on the turn rate
+    through the lever arm: fixes thousands of km apart once drove it past anything
+    a subscriber would decode. Such a state resets the filter instead."""
+    loc = Localizer(EkfConfig())
+    rng = np.random.default_rng(4)
+    for k in range(500):
+        t = 0.02 * k
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 4e-4)
+        loc.update_antenna(t - 0.5, rng.uniform(-9e6, 9e6, 2), np.eye(2), LEVER1)
+        x = loc.x
+        assert abs(x[3]) <= 10.0 and abs(x[4]) <= 20.0 and max(abs(x[0]), abs(x[1])) <= 1e7
+        assert_finite(loc)
+    assert loc.counters.resets_by.get("implausible", 0) >= 1
