@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import stat
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -26,9 +27,23 @@ import numpy.typing as npt
 
 log = logging.getLogger(__name__)
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
-NonNeg = Annotated[float, msgspec.Meta(ge=0)]
-PosInt = Annotated[int, msgspec.Meta(gt=0, le=10_000)]
+# Every float finite by schema (NaN and inf fail a two-sided bound): these configs
+# travel nested in plans. Lengths in metres, at most 10 km.
+MAX_LENGTH_M = 10_000.0
+Pos = Annotated[float, msgspec.Meta(gt=0, le=MAX_LENGTH_M)]
+NonNeg = Annotated[float, msgspec.Meta(ge=0, le=MAX_LENGTH_M)]
+Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]  # m above the ellipsoid
+# Bounds that keep a field description from asking for absurd memory before anything
+# can check it (a 10,000-row field used to end in a 17.9 GiB allocation): the largest
+# breeding trials have a few thousand plots, and the planner states its own, smaller
+# budget (services/planner/budget.py) on top of these.
+MAX_ROWS = 1_000  # rows, and plots per row
+MAX_PLOTS = 20_000
+MAX_CELLS = 5_000_000  # voxel cells of all plots (48 bytes each as boxes)
+MAX_EXTENT_M = 5_000.0  # field boundary, along x and along y
+MAX_FILE_BYTES = 64 << 20  # a GeoJSON of MAX_PLOTS polygons is about 10 MB
+PosInt = Annotated[int, msgspec.Meta(gt=0, le=MAX_ROWS)]
+Voxel = Annotated[float, msgspec.Meta(ge=0.01, le=MAX_LENGTH_M)]  # a cell edge (m)
 Corner = Literal["bottom-right", "bottom-left", "top-right", "top-left"]
 
 FIELDS_DIR = Path(__file__).with_name("fields")
@@ -66,15 +81,15 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     alley_width: Pos
     headland_width: Pos
     edge_width: Pos | None = None
-    voxel_x: Pos = 0.5
-    voxel_y: Pos = 0.5
-    voxel_z: Pos = 0.33
+    voxel_x: Voxel = 0.5
+    voxel_y: Voxel = 0.5
+    voxel_z: Voxel = 0.33
     min_scan_distance: NonNeg = 0.6
     robot_half_length: NonNeg = 0.495
     robot_half_width: NonNeg = 0.335
     origin_lat: Annotated[float, msgspec.Meta(ge=-90, le=90)] | None = None
     origin_lon: Annotated[float, msgspec.Meta(ge=-180, le=180)] | None = None
-    origin_alt: float = 0.0
+    origin_alt: Altitude = 0.0
     row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
     start_corner: Corner = "bottom-right"
 
@@ -154,6 +169,41 @@ def _cells_along(extent: float, voxel: float) -> int:
     return max(1, round(extent / voxel))
 
 
+def cell_dims(layout: FieldLayout, boxes: F64) -> I64:
+    """Cells (nx, ny, nz) of each plot box (P, 6); raises FieldError when all plots
+    together would have more than :data:`MAX_CELLS` (checked before any cell exists)."""
+    vox = (layout.voxel_x, layout.voxel_y, layout.voxel_z)
+    ext = boxes[:, 3:6] - boxes[:, 0:3]
+    # counted in floats first: tiny voxels on huge plots overflow int64
+    approx = np.maximum(1.0, np.round(ext / np.array(vox)))
+    total = float(np.prod(approx, axis=1).sum())
+    if total > MAX_CELLS:
+        raise FieldError(
+            f"field {layout.name!r}: {total:,.0f} voxel cells (voxel_x/y/z = "
+            f"{vox[0]:g} x {vox[1]:g} x {vox[2]:g} m), more than the {MAX_CELLS:,} a field "
+            "may have; use larger voxels or fewer plots"
+        )
+    dims = np.empty((len(boxes), 3), dtype=np.int64)
+    for a in range(3):
+        dims[:, a] = [_cells_along(float(e), vox[a]) for e in ext[:, a]]
+    return dims
+
+
+def check_size(name: str, boxes: F64, bounds: F64) -> None:
+    """Raise FieldError when a field has more than :data:`MAX_PLOTS` plots or is more
+    than :data:`MAX_EXTENT_M` across."""
+    if len(boxes) > MAX_PLOTS:
+        raise FieldError(
+            f"field {name!r}: {len(boxes):,} plots, more than the {MAX_PLOTS:,} a field may have"
+        )
+    size = bounds[2:4] - bounds[0:2]
+    if not np.all(np.isfinite(size)) or size.max() > MAX_EXTENT_M:
+        raise FieldError(
+            f"field {name!r}: {size[0]:,.1f} m x {size[1]:,.1f} m, more than "
+            f"{MAX_EXTENT_M:,.0f} m across"
+        )
+
+
 def _lanes_between(lo: F64, hi: F64, margin_lo: float, margin_hi: float) -> F64:
     """Lane centres in the gaps between consecutive [lo, hi] bands plus one lane
     ``margin`` outside each outer band."""
@@ -167,6 +217,7 @@ def assemble(layout: FieldLayout, boxes: F64, row: I64, col: I64, bounds: F64) -
     Shared by :func:`build_field` (regular layouts) and the GeoJSON loader (measured
     plots). Raises FieldError when rows or columns overlap.
     """
+    check_size(layout.name, boxes, bounds)
     nrows, ncols = int(row.max()) + 1, int(col.max()) + 1
     row_lo = np.array([boxes[row == r, 1].min() for r in range(nrows)])
     row_hi = np.array([boxes[row == r, 4].max() for r in range(nrows)])
@@ -179,11 +230,7 @@ def assemble(layout: FieldLayout, boxes: F64, row: I64, col: I64, bounds: F64) -
     xs = _lanes_between(col_lo, col_hi, layout.alley_width / 2, layout.alley_width / 2)
     ys = _lanes_between(row_lo, row_hi, layout.row_spacing / 2, layout.row_spacing / 2)
 
-    dims = np.empty((len(boxes), 3), dtype=np.int64)
-    vox = (layout.voxel_x, layout.voxel_y, layout.voxel_z)
-    for a in range(3):
-        ext = boxes[:, a + 3] - boxes[:, a]
-        dims[:, a] = [_cells_along(float(e), vox[a]) for e in ext]
+    dims = cell_dims(layout, boxes)
     counts = dims.prod(axis=1)
     offset = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     cell_plot = np.repeat(np.arange(len(boxes), dtype=np.int64), counts)
@@ -229,18 +276,32 @@ def assemble(layout: FieldLayout, boxes: F64, row: I64, col: I64, bounds: F64) -
     )
 
 
-def _clear(layout: FieldLayout, xy: F64, boxes: F64) -> npt.NDArray[np.bool_]:
-    """Clearance rules of the paper (section "Environment modeling")."""
-    lo, hi = boxes[None, :, 0:2], boxes[None, :, 3:5]
-    p = xy[:, None, :]
-    gap = np.maximum(np.maximum(lo - p, p - hi), 0.0)  # per-axis distance to each box
-    far_enough = np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) >= layout.min_scan_distance
+def _clear(layout: FieldLayout, xy: F64, boxes: F64, chunk: int = 256) -> npt.NDArray[np.bool_]:
+    """Clearance rules of the paper (section "Environment modeling").
+
+    Only plots nearer than ``reach`` along both axes can fail a rule, so candidates are
+    tested in spatially compact chunks against the plots near each chunk: memory stays
+    at chunk x nearby plots instead of candidates x plots (1.6 GB for 100 x 100 plots).
+    """
     hl, hw = layout.robot_half_length, layout.robot_half_width
-    fits = np.zeros(len(xy), dtype=bool)
-    for ax, ay in ((hl, hw), (hw, hl)):  # facing along x, then along y
-        overlap = (gap[..., 0] < ax) & (gap[..., 1] < ay)
-        fits |= ~overlap.any(axis=1)
-    return far_enough & fits
+    reach = max(layout.min_scan_distance, hl, hw)
+    ok = np.ones(len(xy), dtype=bool)
+    order = np.lexsort((xy[:, 0], xy[:, 1]))
+    for s in range(0, len(order), chunk):
+        idx = order[s : s + chunk]
+        p = xy[idx]
+        lo_c, hi_c = p.min(axis=0) - reach, p.max(axis=0) + reach
+        near = np.all((boxes[:, 0:2] < hi_c) & (boxes[:, 3:5] > lo_c), axis=1)
+        if not near.any():
+            continue
+        lo, hi = boxes[None, near, 0:2], boxes[None, near, 3:5]
+        gap = np.maximum(np.maximum(lo - p[:, None, :], p[:, None, :] - hi), 0.0)
+        far = np.hypot(gap[..., 0], gap[..., 1]).min(axis=1) >= layout.min_scan_distance
+        fits = np.zeros(len(idx), dtype=bool)
+        for ax, ay in ((hl, hw), (hw, hl)):  # facing along x, then along y
+            fits |= ~((gap[..., 0] < ax) & (gap[..., 1] < ay)).any(axis=1)
+        ok[idx] = far & fits
+    return ok
 
 
 def build_field(layout: FieldLayout) -> Field:
@@ -256,6 +317,12 @@ def build_field(layout: FieldLayout) -> Field:
         raise FieldError(
             f"field {layout.name!r}: edge_width={edge} is less than half the "
             f"row_spacing={layout.row_spacing}, so the edge lane does not fit"
+        )
+    n = layout.rows * layout.plots_per_row
+    if n > MAX_PLOTS:  # before allocating anything per plot
+        raise FieldError(
+            f"field {layout.name!r}: rows x plots_per_row = {layout.rows} x "
+            f"{layout.plots_per_row} = {n:,} plots, more than the {MAX_PLOTS:,} a field may have"
         )
     px = layout.plot_length + layout.alley_width
     py = layout.plot_width + layout.row_spacing
@@ -290,23 +357,38 @@ def example_names() -> list[str]:
     return sorted(p.stem for p in FIELDS_DIR.iterdir() if p.suffix in (".toml", ".geojson"))
 
 
+def field_path(source: str | Path) -> Path:
+    """The file a field source names: the path itself, or for a bare name (no folder,
+    no suffix) that is not a file here, the shipped example ``common/fields/NAME.*``.
+    Raises FieldError when there is no such example."""
+    path = Path(source)
+    if not path.exists() and path.suffix == "" and "/" not in str(source):
+        for ext in (".toml", ".geojson"):
+            if (FIELDS_DIR / f"{source}{ext}").exists():
+                return FIELDS_DIR / f"{source}{ext}"
+        raise FieldError(
+            f"{source}: no such field file or example (examples: {', '.join(example_names())})"
+        )
+    return path
+
+
 def load_field(source: str | Path) -> tuple[FieldLayout, Field]:
     """Read a field from a TOML layout, a GeoJSON FeatureCollection of plot polygons
     (see :mod:`common.field_geojson`), or a shipped example name (``engr``, ``spl``).
 
     Raises FieldError with one line naming the file and the problem.
     """
-    path = Path(source)
-    if not path.exists() and path.suffix == "" and "/" not in str(source):
-        for ext in (".toml", ".geojson"):
-            if (FIELDS_DIR / f"{source}{ext}").exists():
-                path = FIELDS_DIR / f"{source}{ext}"
-                break
-        else:
-            raise FieldError(
-                f"{source}: no such field file or example (examples: {', '.join(example_names())})"
-            )
+    path = field_path(source)
     try:
+        # a regular file of sane size: a FIFO or /dev/zero would never end
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            raise FieldError(f"{path}: not a regular file")
+        if st.st_size > MAX_FILE_BYTES:
+            raise FieldError(
+                f"{path}: {st.st_size:,} bytes, more than the {MAX_FILE_BYTES:,} a field file "
+                "may have"
+            )
         data = path.read_bytes()
     except OSError as exc:
         raise FieldError(f"{path}: cannot read: {exc.strerror}") from None

@@ -17,12 +17,15 @@ import numpy as np
 import numpy.typing as npt
 
 from common.field import (
+    MAX_PLOTS,
+    Altitude,
     Corner,
     Field,
     FieldError,
     FieldLayout,
     NonNeg,
     Pos,
+    Voxel,
     assemble,
     load_field,
 )
@@ -39,13 +42,13 @@ class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     plot_height: Pos = 1.0
     headland_width: Pos = 2.0
     edge_width: Pos = 1.5
-    voxel_x: Pos = 0.5
-    voxel_y: Pos = 0.5
-    voxel_z: Pos = 0.33
+    voxel_x: Voxel = 0.5
+    voxel_y: Voxel = 0.5
+    voxel_z: Voxel = 0.33
     min_scan_distance: NonNeg = 0.6
     robot_half_length: NonNeg = 0.495
     robot_half_width: NonNeg = 0.335
-    origin_alt: float = 0.0
+    origin_alt: Altitude = 0.0
     start_corner: Corner = "bottom-right"
 
 
@@ -116,6 +119,11 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
         raise FieldError(f"{source}: {' '.join(str(exc).split())}{hint}") from None
     if not fc.features:
         raise FieldError(f"{source}: the FeatureCollection has no plot polygons")
+    if len(fc.features) > MAX_PLOTS:  # before converting any polygon
+        raise FieldError(
+            f"{source}: {len(fc.features):,} plot polygons, more than the {MAX_PLOTS:,} a "
+            "field may have"
+        )
     s = fc.settings
     rings: list[F64] = []
     for i, feat in enumerate(fc.features):

@@ -3,18 +3,42 @@
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from pathlib import Path
 
 import msgspec
 
-from common.field import Field, FieldError, FieldLayout, ScannerModel, build_field, load_field
+from common.field import (
+    Field,
+    FieldError,
+    FieldLayout,
+    ScannerModel,
+    build_field,
+    field_path,
+    load_field,
+)
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
+from services.planner.budget import PlanBudget, check
 from services.planner.core import plan
 from services.planner.visibility import Progress
 
 
-def resolve_field(req: PlanRequest) -> tuple[FieldLayout, Field]:
-    """The request's field; raises FieldError naming the offending field."""
+def confine(name: str, allowed: Sequence[Path]) -> Path:
+    """The field file ``name`` refers to, resolved (symlinks and ``..`` followed); raises
+    FieldError unless it is one of ``allowed`` or lies under one of them."""
+    path = field_path(name).resolve()
+    roots = [a.resolve() for a in allowed]
+    if any(path == r or path.is_relative_to(r) for r in roots):
+        return path
+    where = ", ".join(str(r) for r in roots) or "nowhere"
+    raise FieldError(f"PlanRequest.name: {name!r} is outside the planner's field folders ({where})")
+
+
+def resolve_field(
+    req: PlanRequest, allowed: Sequence[Path] | None = None
+) -> tuple[FieldLayout, Field]:
+    """The request's field; raises FieldError naming the offending field. With
+    ``allowed`` (the service), a ``name`` must be a file under one of those paths."""
     given = [
         n for n, v in (("layout", req.layout), ("geojson", req.geojson), ("name", req.name)) if v
     ]
@@ -28,7 +52,7 @@ def resolve_field(req: PlanRequest) -> tuple[FieldLayout, Field]:
         from common.field_geojson import field_from_geojson
 
         return field_from_geojson(req.geojson.encode(), "PlanRequest.geojson")
-    return load_field(req.name)
+    return load_field(req.name if allowed is None else confine(req.name, allowed))
 
 
 def request_key(req: PlanRequest) -> str:
@@ -37,8 +61,16 @@ def request_key(req: PlanRequest) -> str:
     return hashlib.sha256(msgspec.msgpack.encode(body)).hexdigest()
 
 
-def compute(req: PlanRequest, progress: Progress | None = None) -> PlanResult:
-    layout, fld = resolve_field(req)
+def compute(
+    req: PlanRequest,
+    progress: Progress | None = None,
+    budget: PlanBudget | None = None,
+    allowed: Sequence[Path] | None = None,
+) -> PlanResult:
+    """Plan ``req``. Raises FieldError (OverBudget when the field is larger than
+    ``budget``, default :class:`PlanBudget`) or ValueError, each one line."""
+    layout, fld = resolve_field(req, allowed)
+    check(fld, budget or PlanBudget())
     return plan(layout, req.scanner, req.options, field=fld, progress=progress)
 
 

@@ -1,45 +1,57 @@
 """The planner service's Zenoh shell: answers PlanRequests on ``rpc/planner/plan``.
 
-Each request is planned in a worker process, so a long plan (a 2,000-plot field)
-never holds up the answer to a short or cached one; identical requests in flight
-share one computation; finished plans are cached.
+Each request is planned in a worker process (:mod:`services.planner.pool`), so a long
+plan (a 2,000-plot field) never holds up the answer to a short or cached one;
+identical requests in flight share one computation; finished plans are cached. Before
+anything reaches a worker, the request's field is built here and checked: a field
+file outside the configured folders, or a field beyond the budget, gets an error reply
+and costs the workers nothing.
 """
 
 from __future__ import annotations
 
 import collections
-import multiprocessing
 import threading
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future
+from pathlib import Path
 
 from common import keys
-from common.field import FieldError
-from common.launcher import die_with_parent
+from common.field import FIELDS_DIR, FieldError, field_path
 from common.messages.plan import PlanRequest, PlanResult
 from common.service import Context
 from common.transport import RequestError
+from services.planner.budget import check
 from services.planner.config import PlannerConfig
+from services.planner.pool import WorkerDied, WorkerPool
 from services.planner.request import compute, request_key, resolve_field
+
+
+def allowed_paths(ctx: Context, cfg: PlannerConfig) -> list[Path]:
+    """Where a ``PlanRequest.name`` may point: ``cfg.field_dirs`` (default: the
+    shipped examples and the run folder), plus the deployment's own field file."""
+    dirs = [Path(d) for d in cfg.field_dirs] or [FIELDS_DIR, ctx.run_dir]
+    try:
+        own = field_path(ctx.field)
+    except FieldError:
+        return dirs
+    return [*dirs, own]
 
 
 class PlannerService:
     def __init__(self, ctx: Context, cfg: PlannerConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
-        # spawn, not fork: this process runs Zenoh's threads; workers die with it
-        self.pool = ProcessPoolExecutor(
-            cfg.workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=die_with_parent,
-        )
+        self.allowed = allowed_paths(ctx, cfg)
+        self.pool = WorkerPool(cfg.workers, cfg.budget.worker_memory_mb)
         self._lock = threading.Lock()
         self._cache: collections.OrderedDict[str, PlanResult] = collections.OrderedDict()
         self._inflight: dict[str, Future[PlanResult]] = {}
         ctx.bus.serve(keys.PLANNER_PLAN, self.handle)
 
     def handle(self, req: PlanRequest) -> PlanResult:
-        try:
-            resolve_field(req)  # fail fast, in this process, on a bad field
+        try:  # fail fast, in this process, on a bad, forbidden or too large field
+            _, fld = resolve_field(req, self.allowed)
+            check(fld, self.cfg.budget)
         except FieldError as exc:
             raise RequestError(str(exc)) from None
         key = request_key(req)
@@ -51,13 +63,20 @@ class PlannerService:
                 return hit
             fut = self._inflight.get(key)
             if fut is None:
-                fut = self.pool.submit(compute, req)
+                fut = self.pool.submit(compute, req, None, self.cfg.budget, self.allowed)
                 self._inflight[key] = fut
         t0 = time.monotonic()
         try:
             result = fut.result()
         except (FieldError, ValueError) as exc:
             raise RequestError(str(exc)) from None
+        except MemoryError:
+            raise RequestError(
+                f"plan of {fld.name!r} ran out of the worker's memory limit "
+                f"({self.cfg.budget.worker_memory_mb} MB, budget.worker_memory_mb)"
+            ) from None
+        except WorkerDied as exc:
+            raise RequestError(f"plan of {fld.name!r} failed: {exc}") from None
         finally:
             with self._lock:
                 self._inflight.pop(key, None)
@@ -80,7 +99,7 @@ class PlannerService:
             req = PlanRequest(name=self.ctx.field)
             threading.Thread(target=self._warm_up, args=(req,), daemon=True).start()
         stop.wait()
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        self.pool.close()
 
     def _warm_up(self, req: PlanRequest) -> None:
         try:

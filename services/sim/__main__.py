@@ -1,5 +1,5 @@
 from common.service import run
-from services.sim.config import SimConfig
+from services.sim.config import SimCli, SimConfig
 from services.sim.service import build
 
-run("sim", SimConfig, build)
+run("sim", SimConfig, build, options=SimCli())

@@ -1,7 +1,12 @@
+from __future__ import annotations
+
+import argparse
+import json
 from typing import Annotated
 
 import msgspec
 
+from common.config import ConfigError, load_manifest
 from services.sim.render import ScanSettings
 from services.sim.world import WorldConfig
 
@@ -17,6 +22,15 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     empty = the field's origin corner facing along +x.
     ``inclinometer_sd_deg``: the scanner's dual-axis compensator, 0.015 deg (FARO Focus
     S spec: compensator accuracy 0.015 deg).
+    ``resume``: a simulator that died and is restarted within its deployment (same
+    parent process: the launcher) continues the world (sim time, robot, noise) saved
+    in ``<run_dir>/sim/world.json`` for the same field and world config, so the sim
+    clocks of the other services do not stall at the time they had (see
+    :mod:`services.sim.snapshot`); false: always start afresh at 0. ``snapshot_s``:
+    wall seconds between saves (0: never save).
+    ``scan_dir``: the only folder rendered scans may be written under (the scanner's
+    card); empty: the manifest's ``[services.scanner] storage_dir`` when the manifest
+    has one, else the run folder.
     """
 
     real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 1.0
@@ -30,3 +44,26 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     scan: ScanSettings = msgspec.field(default_factory=ScanSettings)
     inclinometer_sd_deg: Annotated[float, msgspec.Meta(ge=0)] = 0.015
     motor_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.25
+    resume: bool = True
+    snapshot_s: Annotated[float, msgspec.Meta(ge=0, le=3600)] = 0.5
+    scan_dir: str = ""
+
+
+class SimCli:
+    """No flags of its own: fills an unset ``scan_dir`` from the manifest's scanner
+    section, so the simulator writes scans exactly where that scanner reads them."""
+
+    def add(self, parser: argparse.ArgumentParser) -> None:
+        pass
+
+    def overrides(self, args: argparse.Namespace) -> list[str]:
+        if args.manifest is None or any(s.startswith("scan_dir=") for s in args.set):
+            return []
+        try:
+            m = load_manifest(args.manifest)
+        except ConfigError:
+            return []  # reported by the runner, which reads it next
+        if "scan_dir" in m.services.get("sim", {}):
+            return []
+        card = m.services.get("scanner", {}).get("storage_dir")
+        return [f"scan_dir={json.dumps(card)}"] if isinstance(card, str) else []

@@ -34,6 +34,7 @@ import numpy.typing as npt
 
 from common.field import ScannerModel
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
+from services.sim.storage import atomic_path
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -219,6 +220,7 @@ def write_e57(
     intensity (N,), optional row/column indices, and ``pose`` (4x4, parent <-
     scanner; None: identity) as the scan's E57 pose, which CloudCompare and SCENE
     apply on import. pye57 stores coordinates as 32-bit floats (~4 um at 70 m).
+    The file appears whole or not at all (written as ``<path>.tmp``, synced, renamed).
     Raises ValueError on mismatched shapes."""
     import pye57
 
@@ -236,11 +238,14 @@ def write_e57(
     if row is not None and col is not None:
         data["rowIndex"] = np.asarray(row, dtype=np.uint16)
         data["columnIndex"] = np.asarray(col, dtype=np.uint16)
-    e57 = pye57.E57(str(path), mode="w")
-    try:
-        e57.write_scan_raw(data, name=name, rotation=_quat_wxyz(m[:3, :3]), translation=m[:3, 3])
-    finally:
-        e57.close()
+    with atomic_path(Path(path)) as tmp:
+        e57 = pye57.E57(str(tmp), mode="w")
+        try:
+            e57.write_scan_raw(
+                data, name=name, rotation=_quat_wxyz(m[:3, :3]), translation=m[:3, 3]
+            )
+        finally:
+            e57.close()
 
 
 def read_e57(path: str | Path, index: int = 0) -> tuple[F64, F32, F64]:

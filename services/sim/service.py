@@ -1,7 +1,13 @@
 """The simulator's Zenoh shell: steps the world in sim time, publishes the clock,
 ground truth (for evaluation only) and what the simulated devices sense, and renders
 scans on request. Time stands still while a scan is rendered: in the world a scan
-is measured, not computed."""
+is measured, not computed.
+
+The world is the deployment's field (``--field`` or the manifest's ``field``), the
+same one every other service plans and navigates in. Its state is saved every
+``snapshot_s`` (see :mod:`services.sim.snapshot`), and a restarted simulator carries
+on from it. Rendered scans go only under the scan folder (see
+:mod:`services.sim.storage`)."""
 
 from __future__ import annotations
 
@@ -29,10 +35,12 @@ from common.messages.sim import (
 )
 from common.service import Context
 from common.transport import RequestError
+from services.sim import snapshot
 from services.sim.config import SimConfig
 from services.sim.lidar import beam_angles
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
+from services.sim.storage import PathRefused, confine
 from services.sim.truth_file import ScanTruth, write_truth
 from services.sim.world import World
 
@@ -41,11 +49,17 @@ class SimService:
     def __init__(self, ctx: Context, cfg: SimConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
         layout, fld = load_field(ctx.field)
+        ctx.log.info("world: field %s (%s), %d plots", fld.name, ctx.field, fld.n_plots)
         self.world = World(layout, fld, cfg.world)
+        self.scan_root = Path(cfg.scan_dir or ctx.run_dir)
         x, y, yaw = cfg.start or (float(fld.origin_xy[0]), float(fld.origin_xy[1]), 0.0)
         self.state = self.world.settle(RobotState(x=x, y=y, yaw=math.radians(yaw)))
         self.rng = np.random.default_rng(cfg.seed)
         self.sim_ns = 0
+        self.snap_path = snapshot.snapshot_path(ctx.run_dir)
+        self.world_id = snapshot.fingerprint(layout, fld, cfg.world)
+        if cfg.resume:
+            self._resume()
         self._lock = threading.Lock()  # held while stepping or rendering
         self._cmd: SimWheelCommand | None = None
         self._cmd_ns = -(10**18)
@@ -64,14 +78,52 @@ class SimService:
             float(angles[1] - angles[0]) if len(angles) > 1 else 0.0,
         )
 
+    def _resume(self) -> None:
+        snap = snapshot.load(self.snap_path, self.world_id)
+        if snap is None:
+            return
+        try:
+            self.state = snapshot.restore(snap, self.rng)
+        except (ValueError, TypeError, KeyError) as exc:
+            self.ctx.log.warning("%s: cannot restore (%s), starting afresh", self.snap_path, exc)
+            self.rng = np.random.default_rng(self.cfg.seed)
+            return
+        self.sim_ns = snap.sim_ns
+        self.ctx.log.info(
+            "continuing the world of %s from sim time %.1f s (saved %.1f s ago), robot at "
+            "(%.2f, %.2f)",
+            self.snap_path,
+            snap.sim_ns / NS,
+            (time.time_ns() - snap.wall_ns) / NS,
+            self.state.x,
+            self.state.y,
+        )
+
+    def save_snapshot(self, closed: bool = False) -> None:
+        """Save the world's state (atomically; the world holds still while it is read);
+        ``closed``: the simulator was told to stop, so there is nothing to continue."""
+        with self._lock:
+            snap = snapshot.take(
+                self.world_id, self.world.field.name, self.sim_ns, self.state, self.rng, closed
+            )
+        snapshot.save(self.snap_path, snap)
+
+    def _snapshots(self, stop: threading.Event) -> None:
+        while not stop.wait(self.cfg.snapshot_s):
+            try:
+                self.save_snapshot()
+            except OSError as exc:  # a full disk must not stop the world
+                self.ctx.log.warning("cannot save the world snapshot: %s", exc)
+
     def _on_wheels(self, cmd: SimWheelCommand) -> None:
         with self._lock:
             self._cmd, self._cmd_ns = cmd, self.sim_ns
 
     def render(self, req: RenderRequest) -> RenderReply:
-        path = Path(req.path)
-        if path.suffix != ".e57":
-            raise RequestError(f"RenderRequest.path: {req.path!r} is not an .e57 file")
+        try:
+            path = confine(req.path, self.scan_root, ".e57", "RenderRequest.path")
+        except PathRefused as exc:
+            raise RequestError(str(exc)) from None
         t0 = time.monotonic()
         with self._lock:  # the world (and its clock) stands still during the scan
             pose = self.world.scanner_pose(self.state)
@@ -159,6 +211,24 @@ class SimService:
             )
 
     def run(self, stop: threading.Event) -> None:
+        saver = None
+        if self.cfg.snapshot_s > 0:
+            saver = threading.Thread(target=self._snapshots, args=(stop,), daemon=True)
+            saver.start()
+        told = False
+        try:
+            self._loop(stop)
+            told = True  # the loop ends only when stop is set: SIGTERM, not a crash
+        finally:
+            stop.set()
+            if saver is not None:
+                saver.join(timeout=2.0)
+                try:
+                    self.save_snapshot(closed=told)
+                except OSError as exc:
+                    self.ctx.log.warning("cannot save the world snapshot: %s", exc)
+
+    def _loop(self, stop: threading.Event) -> None:
         dt = 1.0 / self.cfg.clock_hz
         wall_dt = dt / self.cfg.real_time_factor
         t_next = time.monotonic()

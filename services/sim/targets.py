@@ -114,12 +114,16 @@ _PLANS: dict[bytes, tuple[F64, F64]] = {}
 
 def planned_survey(layout: FieldLayout, field: Field) -> tuple[F64, F64]:
     """Scan locations (S, 2) and the tour's legs (P, 2, 2) of the field's default plan
-    (what the mission surveys unless given a plan file); cached per field."""
+    (what the mission surveys unless given a plan file); cached per field. Raises
+    FieldError (one line) for a field beyond the planner's default budget, which the
+    planner service would refuse too."""
     key = msgspec.json.encode(layout) + field.cand_xy.tobytes() + field.plot_boxes.tobytes()
     if key not in _PLANS:
         # imported here: only a world that places its own spheres needs the planner
+        from services.planner.budget import PlanBudget, check
         from services.planner.core import plan
 
+        check(field, PlanBudget())
         pr = plan(layout, field=field)
         xy = np.array([field.cand_xy[field.candidate_index(c)] for c in pr.selected])
         legs = np.array([[[g.x0, g.y0], [g.x1, g.y1]] for g in pr.legs], dtype=np.float64)

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import msgspec
 
+from services.sim.storage import write_atomic
+
 
 class ScanTruth(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The true scanner pose (4x4 ``field <- scanner``, row-major) and base_link pose
@@ -35,7 +37,8 @@ def truth_path(scan: str | Path) -> Path:
 
 
 def write_truth(scan: str | Path, truth: ScanTruth) -> None:
-    truth_path(scan).write_bytes(msgspec.json.encode(truth))
+    """Write the truth beside ``scan``, whole or not at all (temporary name, renamed)."""
+    write_atomic(truth_path(scan), msgspec.json.encode(truth))
 
 
 def read_truth(scan: str | Path) -> ScanTruth | None:

@@ -1,5 +1,6 @@
 """The planner service as a process, queried from another: plans, errors naming the
-offending field, the cache, and a short request answered while a long one computes."""
+offending field, the cache, a short request answered while a long one computes, the
+workers surviving the warm-up, the field budget and the allowed field folders."""
 
 from __future__ import annotations
 
@@ -11,10 +12,10 @@ import pytest
 
 from common import keys
 from common.cli import wait_alive
-from common.field import load_field
+from common.field import FieldLayout, load_field
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.transport import Bus, RpcError
-from tests.conftest import Procs
+from tests.conftest import REPO, Procs
 
 
 def call(bus: Bus, req: PlanRequest, timeout: float = 120) -> PlanResult:
@@ -28,15 +29,18 @@ def call(bus: Bus, req: PlanRequest, timeout: float = 120) -> PlanResult:
 
 
 @pytest.fixture
-def planner(procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path) -> Bus:
+def planner(
+    procs: Procs,
+    router_endpoint: str,
+    client_bus: Bus,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
+) -> Bus:
+    """The planner service; ``request.param``: extra ``--set`` overrides."""
+    sets = ["warm_up=false", *getattr(request, "param", [])]
+    args = [a for s in sets for a in ("--set", s)]
     procs.service(
-        "services.planner",
-        router_endpoint,
-        "--field",
-        "spl",
-        "--set",
-        "warm_up=false",
-        log=tmp_path / "planner.log",
+        "services.planner", router_endpoint, "--field", "spl", *args, log=tmp_path / "planner.log"
     )
     assert wait_alive(client_bus.session, {"planner"}, timeout=20)
     return client_bus
@@ -91,3 +95,47 @@ def test_short_request_is_not_held_up_by_a_long_one(planner: Bus) -> None:
     assert done, "long request did not finish"
     assert quick < done[0], "the cached answer waited for the long computation"
     assert quick - t0 < 0.3 + 0.5 * (done[0] - t0)
+
+
+@pytest.mark.parametrize("planner", [["warm_up=true"]], indirect=True)
+def test_requests_after_the_warm_up_are_answered(planner: Bus) -> None:
+    # The warm-up thread started the first worker, which got SIGTERM when that thread
+    # ended (PR_SET_PDEATHSIG is per thread): every later request that needed a worker
+    # failed with BrokenProcessPool. Two distinct requests need a worker each.
+    for cover in ("greedy", "exact"):
+        r = call(planner, PlanRequest(name="engr", options=PlanOptions(cover=cover)))
+        assert r.field == "engr" and len(r.selected) >= 11
+    assert call(planner, PlanRequest(name="spl")).field == "spl"  # the warm-up's, cached
+
+
+BIG = FieldLayout(
+    name="big",
+    rows=100,
+    plots_per_row=100,
+    plot_length=3.0,
+    plot_width=1.0,
+    plot_height=1.9,
+    row_spacing=0.8,
+    alley_width=1.5,
+    headland_width=2.25,
+    edge_width=1.4,
+)
+
+
+def test_a_field_beyond_the_budget_is_refused_and_the_planner_keeps_serving(
+    planner: Bus,
+) -> None:
+    t0 = time.monotonic()
+    with pytest.raises(RpcError, match=r"field 'big': 720,000 cells x 10,201 candidates.*budget"):
+        call(planner, PlanRequest(layout=BIG))
+    assert time.monotonic() - t0 < 10, "refused only after working on it"
+    assert call(planner, PlanRequest(name="spl")).field == "spl"
+
+
+def test_field_files_outside_the_allowed_folders_are_refused(planner: Bus, tmp_path: Path) -> None:
+    own = tmp_path / "own.toml"
+    own.write_text((REPO / "common" / "fields" / "spl.toml").read_text())
+    for name in (str(own), "/etc/passwd", "common/fields/../../pyproject.toml"):
+        with pytest.raises(RpcError, match=r"PlanRequest\.name: .* outside the planner's field"):
+            call(planner, PlanRequest(name=name))
+    assert call(planner, PlanRequest(name="common/fields/spl.toml")).field == "spl"

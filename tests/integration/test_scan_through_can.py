@@ -28,12 +28,16 @@ def test_scan_of_engr_lands_as_e57_with_pose_and_tilt(
         *common,
         "--set",
         "real_time_factor=5.0",
+        "--set",
+        f"scan_dir='{tmp_path / 'card'}'",  # the sim renders scans only under it
         log=tmp_path / "sim.log",
     )
     procs.service(
         "services.scanner",
         router_endpoint,
         *common,
+        "--set",
+        "backend=sim",
         "--set",
         f"storage_dir='{tmp_path / 'card'}'",
         "--set",
