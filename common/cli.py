@@ -1,4 +1,5 @@
-"""The ``phenorover`` command: run deployments, ask who is alive, run the simulation."""
+"""The ``phenorover`` command: run deployments, ask who is alive, run the simulation,
+make the deployment's certificates."""
 
 from __future__ import annotations
 
@@ -21,13 +22,64 @@ DEFAULT_MANIFEST = REPO / "deploy" / "sim.toml"
 log = logging.getLogger("phenorover")
 
 
-def open_client(manifest: Path | None, connect: list[str]) -> zenoh.Session:
-    """A client session to a machine's router: the CLI's way onto the network."""
-    if not connect:
-        m = load_manifest(manifest or DEFAULT_MANIFEST)
-        connect = m.zenoh.local_endpoints()
+# how long a command waits for its machine's router: it is local, so it is either
+# there or not (a router just started by `phenorover up` is listening within this)
+CONNECT_TIMEOUT_S = 3.0
+
+
+class Unreachable(ConnectionError):
+    """No router answered at the endpoints; the message names them, on one line."""
+
+
+def client_endpoints(manifest: Path | None, connect: list[str]) -> list[str]:
+    """``--connect`` if given, else where the manifest's machine reaches its router."""
+    if connect:
+        return connect
+    return load_manifest(manifest or DEFAULT_MANIFEST).zenoh.local_endpoints()
+
+
+def open_client(
+    manifest: Path | None, connect: list[str], timeout_s: float = CONNECT_TIMEOUT_S
+) -> zenoh.Session:
+    """A client session to a machine's router: the CLI's way onto the network.
+
+    Raises Unreachable when no router accepts within ``timeout_s`` (a Zenoh client
+    opens only once it has a router: an open session always has one) and ConfigError
+    for a bad manifest."""
+    connect = client_endpoints(manifest, connect)
     zenoh.init_log_from_env_or("error")
-    return zenoh.open(zenoh_config("client", [], connect))
+    try:
+        return zenoh.open(zenoh_config("client", [], connect, client_timeout_s=timeout_s))
+    except zenoh.ZError:
+        where = ", ".join(connect)
+        raise Unreachable(
+            f"no router at {where} within {timeout_s:g} s (is `phenorover up` running "
+            "on this machine?)"
+        ) from None
+
+
+def connect_or_explain(
+    prog: str, manifest: Path | None, connect: list[str], service: str | None = None
+) -> zenoh.Session | None:
+    """open_client for a command: None after printing one line to stderr when the
+    deployment cannot be reached, the manifest is wrong, or (with ``service``) no such
+    service is alive behind the router, e.g. the robot is off or its link down (the
+    caller exits 2). Without that check a call would wait for its full timeout."""
+    try:
+        session = open_client(manifest, connect)
+    except (Unreachable, ConfigError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return None
+    if service is None or any(a.service == service for a in query_alive(session, 2.0)):
+        return session
+    session.close()
+    where = ", ".join(client_endpoints(manifest, connect))
+    print(
+        f"{prog}: no {service} service alive behind {where} (the router is up: is the "
+        f"machine running {service} on and linked?)",
+        file=sys.stderr,
+    )
+    return None
 
 
 def wait_alive(
@@ -46,16 +98,57 @@ def wait_alive(
 
 
 def cmd_up(args: argparse.Namespace) -> int:
+    if args.check:
+        return cmd_check(args.manifest)
     from common.launcher import up
 
     return up(args.manifest)
 
 
-def cmd_status(args: argparse.Namespace) -> int:
+def cmd_check(manifest: Path) -> int:
+    """``up --check``: what each service would open; exit 2 with a line per problem."""
+    from common.preflight import check
+
     try:
-        session = open_client(args.manifest, args.connect)
-    except (ConfigError, zenoh.ZError) as exc:
-        print(f"phenorover status: {exc}", file=sys.stderr)
+        report, problems = check(manifest)
+    except ConfigError as exc:
+        print(f"phenorover up --check: {exc}", file=sys.stderr)
+        return 2
+    print("\n".join(report), flush=True)
+    for line in problems:
+        print(f"phenorover up --check: {line}", file=sys.stderr)
+    if problems:
+        return 2
+    print(f"{manifest}: ready to start")
+    return 0
+
+
+def cmd_certs(args: argparse.Namespace) -> int:
+    from common.certs import CertError, init_ca, issue_files
+
+    hosts = [*args.host, *(("localhost", "127.0.0.1") if args.loopback else ())]
+    try:
+        if args.days is not None and args.days < 1:
+            raise CertError(f"--days {args.days}: must be at least 1")
+        if args.action == "init":
+            if args.machine is not None:
+                raise CertError("certs init makes the CA; `certs issue MACHINE` a machine's")
+            written = init_ca(args.dir, force=args.force, days=args.days or 3650)
+        elif args.machine is None:
+            raise CertError("certs issue: name the machine (e.g. robot)")
+        else:
+            written = issue_files(args.machine, args.dir, hosts, args.force, args.days or 825)
+    except CertError as exc:
+        print(f"phenorover certs: {exc}", file=sys.stderr)
+        return 2
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    session = connect_or_explain("phenorover status", args.manifest, args.connect)
+    if session is None:
         return 2
     with session:
         entries = query_alive(session, timeout=args.timeout)
@@ -65,16 +158,37 @@ def cmd_status(args: argparse.Namespace) -> int:
 
 def cmd_sim(args: argparse.Namespace) -> int:
     """The simulated deployment: all services alive, then (unless --alive-only) a
-    whole survey of the field, with a line per step and a summary."""
+    whole survey of the field, with a line per step and a summary.
+
+    ``--field`` is the field of the whole deployment, not only of the survey: every
+    service (the simulated world included) is started with it. Exit status: 0 when
+    every location was scanned, 1 when the survey failed or left a location unscanned
+    (each named with the reason), 2 on a bad manifest or field."""
+    from common.config import decode_section
+    from common.field import FieldError, load_field
     from common.launcher import Launcher
     from common.transport import Bus
     from services.mission.cli import describe, run_survey
+    from services.planner.budget import check
+    from services.planner.config import PlannerConfig
 
     try:
         launcher = Launcher(args.manifest)
     except ConfigError as exc:
         print(f"phenorover sim: {exc}", file=sys.stderr)
         return 2
+    field = args.field or launcher.manifest.field
+    if args.field and Path(field).exists():  # one file for every service, whatever its cwd
+        field = str(Path(field).resolve())
+    try:  # a field nobody could plan fails here, in one line, before anything starts
+        planner = launcher.manifest.services.get("planner", {})
+        budget = decode_section(planner, PlannerConfig, "[services.planner]").budget
+        check(load_field(field)[1], budget)
+    except FieldError as exc:
+        print(f"phenorover sim: {exc}", file=sys.stderr)
+        return 2
+    if args.field:
+        launcher.extra_args = {name: ["--field", field] for name in launcher.manifest.services}
     wanted = set(launcher.manifest.services)
     t0 = time.monotonic()
     with launcher, open_client(args.manifest, []) as session:
@@ -88,8 +202,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
         if args.alive_only:
             return 0
         bus = Bus(session, "sim-cli")
+        problems: list[str] = []
         try:
-            final = run_survey(bus, args.field or launcher.manifest.field, args.survey_timeout)
+            final = run_survey(bus, field, args.survey_timeout, problems)
             if final is not None:
                 from services.register.hook import wait_registration
 
@@ -103,7 +218,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
             f"summary: {describe(final)}; wall {wall:.0f} s; files in "
             f"{Path(launcher.manifest.run_dir) / final.mission}"
         )
-        return 0 if final.phase.value == "done" else 1
+        complete = final.scans_done == final.scans_total and final.scans_failed == 0
+        if final.phase.value == "done" and complete:
+            return 0
+        for text in problems:
+            print(f"phenorover sim: {text}", file=sys.stderr)
+        if not complete:
+            print(
+                f"phenorover sim: {final.scans_total - final.scans_done} of "
+                f"{final.scans_total} locations not scanned (mission.db in "
+                f"{Path(launcher.manifest.run_dir) / final.mission})",
+                file=sys.stderr,
+            )
+        return 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -113,7 +240,24 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     s = sub.add_parser("up", help="run the services of a manifest on this machine")
     s.add_argument("manifest", type=Path)
+    s.add_argument(
+        "--check",
+        action="store_true",
+        help="start nothing: say what each service would open, exit 2 if anything is missing",
+    )
     s.set_defaults(func=cmd_up)
+
+    from common.certs import DEFAULT_DIR
+
+    s = sub.add_parser("certs", help="make the CA and the machines' TLS certificates")
+    s.add_argument("action", choices=["init", "issue"], help="init: the CA; issue: a machine's")
+    s.add_argument("machine", nargs="?", default=None, help="issue: the machine (common name)")
+    s.add_argument("--dir", type=Path, default=DEFAULT_DIR, help=f"default: {DEFAULT_DIR}")
+    s.add_argument("--host", action="append", default=[], help="another name or address")
+    s.add_argument("--loopback", action="store_true", help="also valid as localhost, 127.0.0.1")
+    s.add_argument("--force", action="store_true", help="replace existing files")
+    s.add_argument("--days", type=int, default=None, help="validity (CA 3650, machine 825)")
+    s.set_defaults(func=cmd_certs)
 
     s = sub.add_parser("status", help="which services are alive, where, since when")
     s.add_argument("--manifest", type=Path, default=None)

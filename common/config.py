@@ -36,6 +36,25 @@ class TlsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     mutual: bool = False
 
 
+Role = Literal["robot", "jetson", "basestation", "hub"]
+
+
+class AccessConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Zenoh access control on this machine's router (made by :func:`common.acl.router_acl`;
+    see docs/security.md). Needs mutual TLS: remote machines are known by their
+    certificate's common name.
+
+    ``remotes`` maps the common name of each machine whose router links to this one to
+    its role (``robot``, ``jetson``, ``basestation``, or ``hub`` for the router this one
+    links to, which relays the others' traffic after checking it); any other link is
+    denied everything. ``loopback`` is the interface this machine's own processes reach
+    the router on; they may do anything.
+    """
+
+    remotes: dict[str, Role]
+    loopback: str = "lo"
+
+
 class ZenohSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """This machine's Zenoh: the router hosted by ``phenorover up`` listens on
     ``listen`` and connects to the other machines' routers in ``connect``; the
@@ -47,18 +66,25 @@ class ZenohSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     # where the services and the CLI on this machine reach the router
     local: list[str] = msgspec.field(default_factory=list)
     tls: TlsConfig | None = None
+    # None: no access control (the simulated deployment, loopback only)
+    access: AccessConfig | None = None
 
     def local_endpoints(self) -> list[str]:
-        return self.local or [e.replace("0.0.0.0", "127.0.0.1") for e in self.listen]
+        """Where this machine's services and CLI reach its router: ``local``, else the
+        plain ``listen`` endpoints on loopback (TLS is for the links between machines)."""
+        plain = [e for e in self.listen if not e.startswith("tls/")]
+        return self.local or [e.replace("0.0.0.0", "127.0.0.1") for e in plain]
 
 
 class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """One machine's deployment. ``field`` is the field being surveyed (an example
     name such as ``engr`` or a field file): its georeference defines the ``field``
-    frame for every service."""
+    frame for every service. No example is assumed: empty (the default) means none,
+    and the launcher refuses a manifest whose services need one, so a robot never
+    surveys an example field by accident."""
 
     machine: str
-    field: str = "engr"
+    field: str = ""
     clock: Literal["wall", "sim"] = "wall"
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
     # service name -> its config section, decoded by the service's own Config type
@@ -141,9 +167,12 @@ def zenoh_config(
     connect: list[str],
     tls: TlsConfig | None = None,
     client_timeout_s: float = 10.0,
+    access_control: dict[str, Any] | None = None,
 ) -> zenoh.Config:
     """An explicit Zenoh config: no multicast scouting, endpoints as given, and a fast
-    reconnect (0.1-1 s) so a restarted peer is back within a second, not four."""
+    reconnect (0.1-1 s) so a restarted peer is back within a second, not four.
+    ``access_control`` is a Zenoh ACL section (:func:`common.acl.router_acl`); a client
+    gives up opening after ``client_timeout_s`` with no router (``zenoh.ZError``)."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -153,6 +182,8 @@ def zenoh_config(
         # a CLI started right after `phenorover up` waits for the router to come up
         conf.insert_json5("connect/timeout_ms", str(int(client_timeout_s * 1000)))
     conf.insert_json5("connect/retry", json.dumps({"period_init_ms": 100, "period_max_ms": 1000}))
+    # the advanced publisher's cache (history topics, common.keys.Topic) needs stamps
+    conf.insert_json5("timestamping/enabled", "true")
     if tls is not None:
         t: dict[str, Any] = {"root_ca_certificate": tls.root_ca}
         if tls.certificate:
@@ -164,4 +195,6 @@ def zenoh_config(
         if tls.mutual:
             t["enable_mtls"] = True
         conf.insert_json5("transport/link/tls", json.dumps(t))
+    if access_control is not None:
+        conf.insert_json5("access_control", json.dumps(access_control))
     return conf

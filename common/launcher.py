@@ -4,13 +4,17 @@ The launcher hosts this machine's Zenoh router, starts each service as its own
 process (``python -m services.<name> --manifest M``), prefixes their output with the
 service name, restarts a service that dies (exponential backoff, logged), and on
 stop sends SIGTERM to all and SIGKILL to whatever is left after ``grace_s``.
+
+Everything is checked before anything starts (:mod:`common.preflight`):
+a manifest that names a missing field or mistyped key is one error line, never a
+service restarted in a loop. With ``[zenoh.access]`` the router enforces access control
+(:mod:`common.acl`) and the denials it logs come out as ``phenorover.acl`` warnings.
 """
 
 from __future__ import annotations
 
 import ctypes
 import dataclasses
-import importlib
 import logging
 import os
 import signal
@@ -22,13 +26,19 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-import msgspec
 import zenoh
 
-from common.config import ConfigError, Manifest, decode_section, load_manifest, zenoh_config
-from services import SERVICES
+from common.acl import LOG_TARGET, DenialLog, router_acl
+from common.config import ConfigError, Manifest, zenoh_config
+from common.preflight import check_field, validate
+from common.preflight import config_type as config_type  # re-exported: tests, tools
 
 log = logging.getLogger("phenorover.up")
+acl_log = logging.getLogger("phenorover.acl")
+
+# the router's access-control verdicts: Zenoh logs them at trace level, allowed and
+# denied alike; :class:`DenialLog` keeps the denials
+ACL_LOG_FILTER = f"error,{LOG_TARGET}=trace"
 
 _PR_SET_PDEATHSIG = 1
 
@@ -42,23 +52,11 @@ def free_loopback_port() -> int:
         return port
 
 
-def config_type(service: str, where: str) -> type[msgspec.Struct]:
-    spec = SERVICES.get(service)
-    if spec is None:
-        known = ", ".join(sorted(SERVICES))
-        raise ConfigError(f"{where}: unknown service {service!r} (known: {known})")
-    module, _, attr = spec.partition(":")
-    t: type[msgspec.Struct] = getattr(importlib.import_module(module), attr)
-    return t
-
-
-def validate(path: Path) -> Manifest:
-    """Load a manifest and check every service section against its config type."""
-    manifest = load_manifest(path)
-    for name, section in manifest.services.items():
-        where = f"{path}: [services.{name}]"
-        decode_section(section, config_type(name, where), where)
-    return manifest
+def router_config(manifest: Manifest) -> zenoh.Config:
+    """This machine's router: its endpoints, TLS and access control from the manifest."""
+    zs = manifest.zenoh
+    acl = router_acl(zs.access) if zs.access is not None else None
+    return zenoh_config("router", zs.listen, zs.connect, zs.tls, access_control=acl)
 
 
 def die_with_parent() -> None:
@@ -66,6 +64,35 @@ def die_with_parent() -> None:
     leaves no orphans (Linux prctl PR_SET_PDEATHSIG)."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+class StdoutFilter:
+    """Zenoh writes its log to file descriptor 1. While this is open, fd 1 is a pipe
+    read by a thread that hands each line to a :class:`DenialLog` and passes every
+    other line on to the real stdout; :meth:`close` puts the real stdout back."""
+
+    def __init__(self, denials: DenialLog) -> None:
+        sys.stdout.flush()
+        self._denials = denials
+        self._real = os.dup(1)
+        read, write = os.pipe()
+        os.dup2(write, 1)
+        os.close(write)  # fd 1 is now the pipe's only writer: EOF once it is put back
+        self._thread = threading.Thread(target=self._pump, args=(read,), daemon=True)
+        self._thread.start()
+
+    def _pump(self, read: int) -> None:
+        with os.fdopen(read, "rb") as pipe, open(self._real, "wb", closefd=False) as out:
+            for raw in pipe:
+                if not self._denials.feed(raw.decode(errors="replace"), time.monotonic()):
+                    out.write(raw)
+                    out.flush()
+
+    def close(self) -> None:
+        sys.stdout.flush()
+        os.dup2(self._real, 1)
+        self._thread.join(timeout=2.0)
+        os.close(self._real)
 
 
 @dataclasses.dataclass
@@ -88,6 +115,7 @@ class Launcher:
     ) -> None:
         self.path = manifest_path
         self.manifest = validate(manifest_path)
+        check_field(self.manifest, manifest_path)
         self.out = out or sys.stdout
         self.extra_args = extra_args or {}
         self.grace_s = grace_s
@@ -96,6 +124,7 @@ class Launcher:
         self._out_lock = threading.Lock()
         self._router: zenoh.Session | None = None
         self._monitor: threading.Thread | None = None
+        self._denials: StdoutFilter | None = None
 
     def _print(self, name: str, line: str) -> None:
         with self._out_lock:
@@ -125,14 +154,25 @@ class Launcher:
 
     def start(self) -> None:
         zs = self.manifest.zenoh
-        zenoh.init_log_from_env_or("error")
+        if zs.access is not None:
+            self._denials = StdoutFilter(DenialLog(acl_log.warning))
+            zenoh.init_log_from_env_or(ACL_LOG_FILTER)
+        else:
+            zenoh.init_log_from_env_or("error")
         try:
-            self._router = zenoh.open(zenoh_config("router", zs.listen, zs.connect, zs.tls))
+            self._router = zenoh.open(router_config(self.manifest))
         except zenoh.ZError as exc:
+            self._close_router()
+            msg = " ".join(str(exc).split(" at /")[0].split())
             raise ConfigError(
-                f"{self.path}: cannot open the router on {zs.listen}: {exc}"
+                f"{self.path}: cannot open the router on {zs.listen}: {msg}"
             ) from None
-        log.info("router on %s, connecting to %s", zs.listen, zs.connect or "nobody")
+        log.info(
+            "router on %s, connecting to %s%s",
+            zs.listen,
+            zs.connect or "nobody",
+            ", access control on" if zs.access is not None else "",
+        )
         for child in self.children.values():
             self._spawn(child)
         self._monitor = threading.Thread(target=self._watch, daemon=True)
@@ -181,10 +221,16 @@ class Launcher:
                 log.warning("pid %d did not stop in %.0f s: killing it", p.pid, self.grace_s)
                 p.kill()
                 p.wait()
+        self._close_router()
+        log.info("all services stopped")
+
+    def _close_router(self) -> None:
         if self._router is not None:
             self._router.close()
             self._router = None
-        log.info("all services stopped")
+        if self._denials is not None:  # after the router: it logs until it is closed
+            self._denials.close()
+            self._denials = None
 
     def __enter__(self) -> Launcher:
         self.start()

@@ -29,7 +29,7 @@ class GnssConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     error assumed per fix type when the receiver sends no GST sentence.
     """
 
-    backend: Literal["sim", "nmea-serial", "nmea-tcp"] = "sim"
+    backend: Literal["sim", "nmea-serial", "nmea-tcp"]  # required: no simulated default
     antennas: list[AntennaConfig] = msgspec.field(default_factory=_antennas)
     compass: CompassConfig = msgspec.field(default_factory=CompassConfig)
     rtk: RtkModelConfig = msgspec.field(default_factory=RtkModelConfig)

@@ -102,11 +102,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2
     if args.remote:
-        from common.cli import open_client
+        from common.cli import connect_or_explain
         from common.keys import PLANNER_PLAN
         from common.transport import Bus, RpcError
 
-        with open_client(args.manifest, args.connect) as session:
+        prog = "phenorover plan --remote"
+        session = connect_or_explain(prog, args.manifest, args.connect, service="planner")
+        if session is None:
+            return 2  # the line saying which endpoint could not be reached is printed
+        with session:
             bus = Bus(session, "cli")
             try:
                 result = bus.call(PLANNER_PLAN, req, timeout=args.timeout)

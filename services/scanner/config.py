@@ -17,7 +17,7 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     clock (sim time in simulation), ``ack_timeout_s`` on wall time.
     """
 
-    backend: Literal["can", "sim"] = "sim"
+    backend: Literal["can", "sim"]  # required: no simulated default
     interface: str = "socketcan"
     channel: str = "can0"
     bitrate: Annotated[int, msgspec.Meta(gt=0)] = 500_000

@@ -32,7 +32,12 @@ def test_sim_receivers_give_fixes_and_a_heading_near_truth(
     fixes: list[NavSatFix] = []
     collect(client_bus, keys.GNSS_HEADING, headings)
     collect(client_bus, keys.GNSS_FIX.at(antenna=1), fixes)
-    procs.service("services.gnss", router_endpoint, "--field", "engr", log=tmp_path / "gnss.log")
+    procs.service(
+        "services.gnss",
+        router_endpoint,
+        *("--field", "engr", "--set", "backend=sim"),
+        log=tmp_path / "gnss.log",
+    )
     assert wait_alive(client_bus.session, {"gnss"}, timeout=20)
     pub = client_bus.publisher(keys.SIM_ANTENNAS)
     assert pub.wait_matched(timeout=10)

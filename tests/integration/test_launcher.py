@@ -1,4 +1,5 @@
-"""``phenorover up`` and ``phenorover status`` as a user runs them."""
+"""``phenorover up``, ``up --check`` and ``status`` as a user runs them, and the
+commands that cannot reach their deployment."""
 
 from __future__ import annotations
 
@@ -16,16 +17,18 @@ from common.config import zenoh_config
 from tests.conftest import REPO, Procs, free_port, pid_alive
 
 
-def write_manifest(tmp: Path, port: int, extra: str = "") -> Path:
+def write_manifest(tmp: Path, port: int, extra: str = "", field: str = "engr") -> Path:
     m = tmp / "test.toml"
     m.write_text(
         f"""machine = "testbox"
 clock = "sim"
+field = "{field}"
 [zenoh]
 listen = ["tcp/127.0.0.1:{port}"]
 [services.sim]
 real_time_factor = 5.0
 [services.gnss]
+backend = "sim"
 {extra}"""
     )
     return m
@@ -100,3 +103,112 @@ def test_unknown_service_in_manifest(tmp_path: Path) -> None:
     )
     assert r.returncode == 2
     assert "unknown service 'gnsss'" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def run_cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "common.cli", *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def test_a_missing_field_is_refused_before_anything_starts(tmp_path: Path) -> None:
+    port = free_port()
+    manifest = write_manifest(tmp_path, port, field=str(tmp_path / "nowhere.toml"))
+    r = run_cli("up", str(manifest))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr  # no service got to start and fail
+    assert "test.toml: field:" in lines[0] and "nowhere.toml" in lines[0]
+    assert r.stdout == ""
+
+
+def test_a_malformed_field_and_no_field_are_refused(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("rows = 'many'\n")
+    for field, says in ((str(bad), "bad.toml"), ("", "need the surveyed field")):
+        r = run_cli("up", str(write_manifest(tmp_path, free_port(), field=field)))
+        assert r.returncode == 2
+        assert len(r.stderr.strip().splitlines()) == 1 and says in r.stderr, r.stderr
+
+
+def test_a_device_section_must_name_its_backend(tmp_path: Path) -> None:
+    manifest = write_manifest(tmp_path, free_port(), extra="[services.base]\n")
+    r = run_cli("up", "--check", str(manifest))
+    assert r.returncode == 2
+    assert "[services.base]" in r.stderr and "`backend`" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+
+
+def test_up_check_names_what_it_would_open_and_what_is_missing(tmp_path: Path) -> None:
+    card = tmp_path / "card"
+    card.mkdir()
+    missing = "/dev/ttyPHENOROVER-TEST"
+    manifest = write_manifest(
+        tmp_path,
+        free_port(),
+        extra=f"""[services.scanner]
+backend = "can"
+interface = "socketcan"
+channel = "canPHENO9"
+storage_dir = "{card}"
+""",
+    )
+    text = manifest.read_text().replace(
+        '[services.gnss]\nbackend = "sim"',
+        f'[services.gnss]\nbackend = "nmea-serial"\nantennas = [{{id = 1, port = "{missing}"}}]',
+    )
+    manifest.write_text(text)
+    r = run_cli("up", "--check", str(manifest))
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert f"antenna 1: serial {missing} at 115200 baud" in r.stdout
+    assert "CAN socketcan canPHENO9" in r.stdout and f"scan files in {card}" in r.stdout
+    problems = r.stderr.strip().splitlines()
+    assert len(problems) == 2, r.stderr
+    assert f"gnss: {missing}: no such device" in problems[0]
+    assert "scanner: canPHENO9: no such CAN interface" in problems[1]
+    ok = run_cli("up", "--check", str(REPO / "deploy" / "sim.toml"))
+    assert ok.returncode == 0 and "ready to start" in ok.stdout, ok.stderr
+
+
+def test_commands_that_cannot_reach_their_deployment_say_where_in_one_line() -> None:
+    ep = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    commands = {
+        "status": ["status", "--connect", ep],
+        "mission status": ["mission", "status", "--connect", ep],
+        "mission start": ["mission", "start", "--connect", ep],
+        "plan --remote": ["plan", "engr", "--remote", "--connect", ep],
+    }
+    runs = {
+        name: subprocess.Popen(
+            [sys.executable, "-m", "common.cli", *args],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for name, args in commands.items()
+    }
+    for name, p in runs.items():
+        out, err = p.communicate(timeout=60)
+        assert p.returncode == 2, (name, err)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and ep in lines[0] and "no router" in lines[0], (name, err)
+        assert "Traceback" not in err and out == "", (name, out)
+
+
+def test_a_command_whose_service_is_not_alive_says_so_at_once(router_endpoint: str) -> None:
+    # the router answers, but nothing behind it serves missions or plans (the robot off)
+    for args, service in (
+        (["mission", "status"], "mission"),
+        (["plan", "engr", "--remote"], "planner"),
+    ):
+        r = run_cli(*args, "--connect", router_endpoint, timeout=30)
+        assert r.returncode == 2, r.stderr
+        lines = r.stderr.strip().splitlines()
+        assert (
+            len(lines) == 1 and f"no {service} service alive behind {router_endpoint}" in lines[0]
+        )

@@ -18,7 +18,8 @@ from tests.conftest import Procs
 
 
 def start(procs: Procs, ep: str, bus: Bus, tmp: Path, *sets: str) -> None:
-    args = ["--set", f"storage_dir='{tmp / 'card'}'", "--set", "sim_scan_time_s=1.0"]
+    args = ["--set", "backend=sim", "--set", f"storage_dir='{tmp / 'card'}'"]
+    args += ["--set", "sim_scan_time_s=1.0"]
     for s in sets:
         args += ["--set", s]
     procs.service("services.scanner", ep, *args, log=tmp / "scanner.log")

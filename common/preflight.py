@@ -1,0 +1,274 @@
+"""What is checked before a deployment starts, and ``phenorover up --check``.
+
+:func:`validate` checks a manifest as written (every service section against its
+config type, the Zenoh settings); :func:`check_field` loads its field. The launcher
+runs both before it starts anything, so a bad manifest is one error line, never a
+service restarted in a loop.
+
+:func:`check` is ``phenorover up --check``: what each service would open (serial port,
+TCP address, CAN channel, ROS 2 topics, folders, the field, TLS files) and one problem
+line per device or file that is not there. Nothing is opened: devices and files are
+only looked at (``/dev/ttyUSB0`` exists, ``/sys/class/net/can0`` exists, a file is
+readable), so it is safe beside a running deployment and on a machine with no hardware.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from common.certs import tls_problems
+from common.config import (
+    ConfigError,
+    Manifest,
+    TlsConfig,
+    ZenohSettings,
+    decode_section,
+    load_manifest,
+)
+from common.field import FieldError, load_field
+from common.field_geojson import load_frame
+from services import SERVICES
+
+# services that cannot start without the surveyed field: its georeference is the frame
+# they publish in (viz and the planner do without one until a plan names it)
+NEEDS_FIELD = ("sim", "gnss", "nav")
+
+
+def config_type(service: str, where: str) -> type[msgspec.Struct]:
+    spec = SERVICES.get(service)
+    if spec is None:
+        known = ", ".join(sorted(SERVICES))
+        raise ConfigError(f"{where}: unknown service {service!r} (known: {known})")
+    module, _, attr = spec.partition(":")
+    t: type[msgspec.Struct] = getattr(importlib.import_module(module), attr)
+    return t
+
+
+def validate(path: Path) -> Manifest:
+    """Load a manifest and check it as written, touching no other file: every service
+    section against its config type, and the Zenoh settings (:func:`check_zenoh`).
+    Raises ConfigError, one line naming the file and the key."""
+    manifest = load_manifest(path)
+    for name, section in manifest.services.items():
+        where = f"{path}: [services.{name}]"
+        decode_section(section, config_type(name, where), where)
+    check_zenoh(manifest.zenoh, f"{path}: [zenoh]")
+    return manifest
+
+
+def _loopback(endpoint: str) -> bool:
+    host = endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
+    return host in ("localhost", "::1") or host.startswith("127.")
+
+
+def check_zenoh(zs: ZenohSettings, where: str) -> None:
+    """TLS endpoints need ``[zenoh.tls]``; access control needs mutual TLS (remote
+    machines are known by their certificates) and no plain TCP off loopback."""
+    for ep in [*zs.listen, *zs.connect]:
+        if ep.startswith("tls/") and zs.tls is None:
+            raise ConfigError(f"{where}: {ep} needs [zenoh.tls] (root_ca, certificate, ...)")
+    if zs.access is None:
+        return
+    tls = zs.tls
+    if tls is None or not (tls.mutual and tls.certificate and tls.private_key):
+        raise ConfigError(
+            f"{where}.access needs [zenoh.tls] with certificate, private_key and "
+            "mutual = true: remote machines are known by their certificates"
+        )
+    for ep in zs.listen:
+        if not ep.startswith("tls/") and not _loopback(ep):
+            raise ConfigError(
+                f"{where}: listen {ep}: plain {ep.partition('/')[0]} off loopback would "
+                "bypass TLS; use tls/ between machines"
+            )
+
+
+def check_field(manifest: Manifest, path: Path) -> None:
+    """The manifest's field loads (and is georeferenced where a service needs its
+    frame); a manifest whose services need a field names one. Raises ConfigError."""
+    needs = [s for s in NEEDS_FIELD if s in manifest.services]
+    if not manifest.field:
+        if needs:
+            raise ConfigError(
+                f"{path}: field: not set, and {', '.join(needs)} need the surveyed field "
+                "(a .toml/.geojson field file, or an example name such as engr)"
+            )
+        return
+    try:
+        if {"gnss", "nav"} & set(needs):
+            load_frame(manifest.field)
+        else:
+            load_field(manifest.field)
+    except FieldError as exc:
+        raise ConfigError(f"{path}: field: {exc}") from None
+
+
+@dataclasses.dataclass(frozen=True)
+class Finding:
+    """One thing a service would open, and why it cannot (``problem``), if it cannot."""
+
+    what: str
+    problem: str = ""
+
+
+def _exists(path: str, kind: str) -> str:
+    return "" if os.path.exists(path) else f"{path}: no such {kind}"
+
+
+def _device(path: str) -> str:
+    if not os.path.exists(path):
+        return f"{path}: no such device"
+    return "" if os.access(path, os.R_OK | os.W_OK) else f"{path}: not readable and writable"
+
+
+def _folder(path: str) -> str:
+    """A folder a service writes into: it exists and is writable, or can be made."""
+    p = Path(path).absolute()
+    while not p.exists():
+        p = p.parent
+    if not p.is_dir():
+        return f"{path}: {p} is not a folder"
+    return "" if os.access(p, os.W_OK | os.X_OK) else f"{path}: {p} is not writable"
+
+
+def _readable(path: str, what: str) -> str:
+    if not os.path.isfile(path):
+        return f"{what} {path}: no such file"
+    return "" if os.access(path, os.R_OK) else f"{what} {path}: not readable"
+
+
+def _gnss(cfg: Any) -> list[Finding]:
+    if cfg.backend == "sim":
+        return [Finding("simulated receivers (from the sim service)")]
+    out = []
+    for a in cfg.antennas:
+        if cfg.backend == "nmea-serial":
+            out.append(
+                Finding(f"antenna {a.id}: serial {a.port} at {a.baud} baud", _device(a.port))
+            )
+        else:
+            host = f"{a.host}:{a.tcp_port}"
+            out.append(
+                Finding(
+                    f"antenna {a.id}: NMEA over TCP from {host}",
+                    "" if a.host else f"antenna {a.id}: no host",
+                )
+            )
+    return out
+
+
+def _base(cfg: Any) -> list[Finding]:
+    if cfg.backend == "sim":
+        return [Finding("simulated base (from the sim service)")]
+    return [
+        Finding(
+            f"ROS 2 topics through zenoh-bridge-ros2dds: {cfg.ros2_cmd_vel} (Twist out), "
+            f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in)"
+        )
+    ]
+
+
+def _scanner(cfg: Any) -> list[Finding]:
+    if cfg.backend == "sim":
+        return [
+            Finding("simulated FARO on a virtual CAN bus in this process"),
+            Finding(f"scan files in {cfg.storage_dir}", _folder(cfg.storage_dir)),
+        ]
+    bus = f"CAN {cfg.interface} {cfg.channel} at {cfg.bitrate} bit/s"
+    problem = ""
+    if cfg.interface == "socketcan":
+        if not os.path.exists(f"/sys/class/net/{cfg.channel}"):
+            problem = f"{cfg.channel}: no such CAN interface (see `ip link show`)"
+    elif cfg.channel.startswith("/dev/"):  # slcan, serial: an adapter's tty
+        problem = _device(cfg.channel.split("@")[0])
+    # the scanner's card, mounted here: a scan is done only when its file is on it
+    card = _exists(cfg.storage_dir, "folder (is the scanner's card mounted?)")
+    return [Finding(bus, problem), Finding(f"scan files in {cfg.storage_dir}", card)]
+
+
+def _viz(cfg: Any) -> list[Finding]:
+    out = []
+    if cfg.serve:
+        out.append(
+            Finding(f"rerun gRPC on {cfg.bind}:{cfg.grpc_port}, web viewer on port {cfg.web_port}")
+        )
+    if cfg.save:
+        out.append(Finding(f"recording to {cfg.save}"))
+    return out or [Finding("no devices")]
+
+
+DESCRIBE: dict[str, Callable[[Any], list[Finding]]] = {
+    "gnss": _gnss,
+    "base": _base,
+    "scanner": _scanner,
+    "viz": _viz,
+}
+
+
+def _tls(tls: TlsConfig, machine: str) -> list[Finding]:
+    cert = Path(tls.certificate) if tls.certificate else None
+    key = Path(tls.private_key) if tls.private_key else None
+    problems = tls_problems(Path(tls.root_ca), cert, key, machine)
+    files = [tls.root_ca, tls.certificate, tls.private_key]
+    what = "mutual TLS with " if tls.mutual else "TLS with "
+    first = problems[0] if problems else ""
+    found = [Finding(what + ", ".join(f for f in files if f), first)]
+    return found + [Finding("", p) for p in problems[1:]]
+
+
+def _zenoh(zs: ZenohSettings) -> list[Finding]:
+    out = [
+        Finding(f"router listens on {', '.join(zs.listen)}"),
+        Finding(f"router connects to {', '.join(zs.connect) or 'nobody'}"),
+        Finding(f"services and the CLI reach it on {', '.join(zs.local_endpoints())}"),
+    ]
+    if zs.access is not None:
+        remotes = ", ".join(f"{cn} as {role}" for cn, role in sorted(zs.access.remotes.items()))
+        out.append(Finding(f"access control: default deny; remote machines: {remotes}"))
+    elif all(_loopback(e) for e in [*zs.listen, *zs.connect]):
+        out.append(Finding("no access control: open to this machine only (loopback)"))
+    else:
+        out.append(Finding("no access control: anyone who reaches the router may do anything"))
+    return out
+
+
+def describe(manifest: Manifest, path: Path) -> list[tuple[str, Finding]]:
+    """Every (section, finding) of a validated manifest, problems included."""
+    found = [("zenoh", f) for f in _zenoh(manifest.zenoh)]
+    if manifest.zenoh.tls is not None:
+        found += [("tls", f) for f in _tls(manifest.zenoh.tls, manifest.machine)]
+    field = Finding(manifest.field or "none")
+    try:
+        check_field(manifest, path)
+    except ConfigError as exc:
+        field = Finding(field.what, str(exc).removeprefix(f"{path}: field: "))
+    found.append(("field", field))
+    found.append(("run dir", Finding(manifest.run_dir, _folder(manifest.run_dir))))
+    for name, section in manifest.services.items():
+        where = f"[services.{name}]"
+        cfg = decode_section(section, config_type(name, where), where)
+        found += [(name, f) for f in DESCRIBE.get(name, lambda _: [Finding("no devices")])(cfg)]
+    return found
+
+
+def check(path: Path) -> tuple[list[str], list[str]]:
+    """``phenorover up --check``: (report lines, problem lines). Raises ConfigError
+    when the manifest itself is wrong."""
+    manifest = validate(path)
+    found = describe(manifest, path)
+    width = max(len(s) for s, _ in found)
+    report = [f"{path}: machine {manifest.machine}"]
+    report += [
+        f"  {s:<{width}}  {f.what}" + ("  [MISSING]" if f.problem else "")
+        for s, f in found
+        if f.what
+    ]
+    problems = [f"{path}: {s}: {f.problem}" for s, f in found if f.problem]
+    return report, problems
