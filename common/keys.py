@@ -27,12 +27,17 @@ class Topic(Generic[M]):
     ``bulk`` topics (point clouds, plans) are published with congestion control BLOCK
     so a slow subscriber slows the publisher instead of losing data; ``control``
     topics get Zenoh's real-time priority and DROP, where only the newest value matters.
+    ``history`` topics (the mission's events) are published with a cache of that many
+    messages and subscribed with history and miss recovery (Zenoh's advanced
+    publisher and subscriber): a subscriber that joins late, or whose link was cut,
+    receives what it missed once it can reach the publisher again.
     """
 
     key: str
     type: type[M]
     bulk: bool = False
     control: bool = False
+    history: int = 0
 
     def at(self, **params: Any) -> Topic[M]:
         return dataclasses.replace(self, key=self.key.format(**params))
@@ -95,7 +100,9 @@ PLANNER_PLAN = Rpc[plan.PlanRequest, plan.PlanResult](
 )
 
 MISSION_STATE = Topic(_k("mission/state"), mission.MissionState)
-MISSION_EVENT = Topic(_k("mission/event"), mission.MissionEvent)
+# a survey's events reach the base station even across a cut link: 10,000 events is
+# days of surveying (a few per scan location), about 1 MB in the mission's memory
+MISSION_EVENT = Topic(_k("mission/event"), mission.MissionEvent, history=10_000)
 # the running mission's plan, re-published every few seconds (Zenoh does not latch) for
 # late joiners such as the dashboard; not bulk: a dropped copy is replaced by the next
 MISSION_PLAN = Topic(_k("mission/plan"), plan.PlanResult)
@@ -103,31 +110,29 @@ MISSION_CMD = Rpc[mission.MissionCommand, mission.MissionState](
     _k("rpc/mission/cmd"), mission.MissionCommand, mission.MissionState
 )
 
-TOPICS: dict[str, type] = {
-    t.key: t.type
-    for t in (
-        HEALTH,
-        SIM_CLOCK,
-        SIM_TRUTH,
-        SIM_ANTENNAS,
-        SIM_WHEELS,
-        SIM_ENCODERS,
-        SIM_LIDAR,
-        GNSS_FIX,
-        GNSS_HEADING,
-        BASE_CMD_VEL,
-        BASE_ODOM,
-        BASE_SCAN,
-        BASE_ESTOP,
-        BASE_STATUS,
-        NAV_POSE,
-        NAV_PROGRESS,
-        SCANNER_STATUS,
-        MISSION_STATE,
-        MISSION_EVENT,
-        MISSION_PLAN,
-    )
-}
+ALL_TOPICS: tuple[Topic[Any], ...] = (
+    HEALTH,
+    SIM_CLOCK,
+    SIM_TRUTH,
+    SIM_ANTENNAS,
+    SIM_WHEELS,
+    SIM_ENCODERS,
+    SIM_LIDAR,
+    GNSS_FIX,
+    GNSS_HEADING,
+    BASE_CMD_VEL,
+    BASE_ODOM,
+    BASE_SCAN,
+    BASE_ESTOP,
+    BASE_STATUS,
+    NAV_POSE,
+    NAV_PROGRESS,
+    SCANNER_STATUS,
+    MISSION_STATE,
+    MISSION_EVENT,
+    MISSION_PLAN,
+)
+TOPICS: dict[str, type] = {t.key: t.type for t in ALL_TOPICS}
 
 RPCS: dict[str, tuple[Any, type]] = {
     r.key: (r.request, r.reply)

@@ -170,16 +170,15 @@ def main(
     clock: Clock
     if clock_kind == "sim":
         sim_clock = SimClock()
+        bus.report("clock_refused", lambda: sim_clock.refused)
         bus.subscribe(keys.SIM_CLOCK, sim_clock.update)
         clock = sim_clock
     else:
         clock = WallClock()
     since_ns = time.time_ns()
-    token = session.liveliness().declare_token(
-        keys.ALIVE.format(machine=machine, service=name, pid=os.getpid(), since_ns=since_ns)
-    )
     run_dir = Path(manifest.run_dir if manifest else "runs")
-    field = args.field or (manifest.field if manifest else "engr")
+    # no example field by default: a service that needs one and was given none fails
+    field = args.field or (manifest.field if manifest else "")
     ctx = Context(name, machine, bus, clock, logging.getLogger(name), run_dir, field)
     bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text))
     health = threading.Thread(
@@ -187,8 +186,14 @@ def main(
     )
     health.start()
     code = 0
+    token: zenoh.LivelinessToken | None = None
     try:
         service = build(ctx, cfg)
+        # alive only once it serves: build() has declared every subscriber and
+        # queryable, so a supervisor that sees the token can talk to it at once
+        token = session.liveliness().declare_token(
+            keys.ALIVE.format(machine=machine, service=name, pid=os.getpid(), since_ns=since_ns)
+        )
         log.info("%s: up on %s (%s clock), config: %s", name, machine, clock_kind, cfg)
         service.run(stop)
     except (ConfigError, FieldError) as exc:
@@ -200,7 +205,8 @@ def main(
     finally:
         stop.set()
         health.join(timeout=2.0)
-        token.undeclare()
+        if token is not None:
+            token.undeclare()
         bus.close()
         session.close()
     log.info("%s: stopped", name)
@@ -216,9 +222,12 @@ def _heartbeat(bus: Bus, name: str, machine: str, since_ns: int, stop: threading
                 service=name,
                 machine=machine,
                 pid=os.getpid(),
-                uptime_s=(time.time_ns() - since_ns) / 1e9,
+                # a wall clock stepped back (NTP) must not make the heartbeat undecodable
+                uptime_s=max(0.0, (time.time_ns() - since_ns) / 1e9),
                 decode_errors=bus.decode_stats.total,
-                last_error=bus.decode_stats.last_error,
+                last_error=bus.last_error,
+                callback_errors=bus.callback_stats.total,
+                counters=bus.reports(),
             )
         )
         if stop.wait(1.0):

@@ -3,13 +3,17 @@
 Only this module (and the service runner) touch Zenoh's API. Messages are msgpack
 encoded by msgspec, one reused Encoder and one Decoder per type. A message that
 fails to decode is logged once per key with the reason, counted, and dropped: a bad
-peer cannot crash a service.
+peer cannot crash a service. A subscriber callback or RPC handler that raises is
+treated the same way (first traceback per key logged, every one counted): a stream of
+bad input must show in ``health/<service>``, not as a log of tens of thousands of
+tracebacks.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -19,6 +23,7 @@ from typing import Any, Generic, TypeVar
 import msgspec
 import numpy as np
 import zenoh
+import zenoh.ext
 
 from common.keys import Rpc, Topic
 
@@ -27,6 +32,8 @@ Q = TypeVar("Q")
 R = TypeVar("R")
 
 log = logging.getLogger(__name__)
+# how often a history topic's publisher announces its last sequence number (s)
+HEARTBEAT_S = 0.5
 
 
 def _enc_hook(obj: Any) -> Any:
@@ -67,12 +74,14 @@ class RequestError(ValueError):
 
 
 class DecodeStats:
-    """Counts of messages dropped because they did not decode, per key."""
+    """Counts of failures per key (messages dropped because they did not decode, or
+    callbacks that raised), with the latest one as a line and its wall time."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self.by_key: dict[str, int] = {}
         self.last_error = ""
+        self.last_ns = 0  # wall time of the latest failure, 0 before any
 
     @property
     def total(self) -> int:
@@ -85,6 +94,7 @@ class DecodeStats:
             n = self.by_key.get(key, 0)
             self.by_key[key] = n + 1
             self.last_error = f"{key}: {reason}"
+            self.last_ns = time.time_ns()
             return n == 0
 
 
@@ -123,14 +133,15 @@ class Latest(Generic[M]):
 
 
 class Publisher(Generic[M]):
-    def __init__(self, pub: zenoh.Publisher, topic: Topic[M]) -> None:
+    def __init__(self, pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher, topic: Topic[M]) -> None:
         self._pub = pub
         self.topic = topic
 
     def wait_matched(self, timeout: float) -> bool:
         """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
         deadline = time.monotonic() + timeout
-        while not self._pub.matching_status.matching:  # type: ignore[attr-defined]
+        # an advanced publisher (history topics) has no matching status: it caches
+        while not getattr(getattr(self._pub, "matching_status", None), "matching", True):
             if time.monotonic() >= deadline:
                 return False
             time.sleep(0.02)
@@ -149,12 +160,16 @@ class Bus:
 
     Subscription callbacks run on Zenoh's threads: keep them short (store, notify).
     RPC handlers run on a small thread pool so a slow request does not block others.
+    ``decode_stats`` counts what failed to decode, ``callback_stats`` what decoded
+    but made its callback or handler raise; both per key.
     """
 
     def __init__(self, session: zenoh.Session, name: str, rpc_workers: int = 4) -> None:
         self.session = session
         self.name = name
         self.decode_stats = DecodeStats()
+        self.callback_stats = DecodeStats()
+        self._reports: dict[str, Callable[[], int]] = {}
         self._handles: list[Any] = []
         self._pool = ThreadPoolExecutor(max_workers=rpc_workers, thread_name_prefix=f"{name}-rpc")
 
@@ -163,6 +178,35 @@ class Bus:
         if self.decode_stats.record(key, reason):
             log.warning("dropped undecodable message on %s: %s", key, reason)
 
+    def _failed(self, key: str, what: str) -> None:
+        """Count a callback or handler that raised (call from its ``except``): the
+        first failure per key is logged with its traceback, later ones only counted,
+        so a stream of bad input cannot flood the log."""
+        exc = sys.exc_info()[1]
+        reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
+        if self.callback_stats.record(key, f"{what} raised {type(exc).__name__}: {reason}"):
+            log.exception("%s for %s failed (later failures on it are only counted)", what, key)
+
+    def report(self, name: str, read: Callable[[], int]) -> None:
+        """Add a count to this service's ``health/<service>`` heartbeat
+        (``Health.counters[name]``): ``read`` is called from the heartbeat's thread,
+        so it must only read (an int attribute is fine)."""
+        self._reports[name] = read
+
+    def reports(self) -> dict[str, int]:
+        """Every reported count now; one whose ``read`` raises is left out."""
+        out = {}
+        for name, read in list(self._reports.items()):
+            with contextlib.suppress(Exception):
+                out[name] = int(read())
+        return out
+
+    @property
+    def last_error(self) -> str:
+        """The latest failure of either kind, one line ("" before any)."""
+        d, c = self.decode_stats, self.callback_stats
+        return d.last_error if d.last_ns >= c.last_ns else c.last_error
+
     def publisher(self, topic: Topic[M]) -> Publisher[M]:
         if topic.bulk:
             cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
@@ -170,13 +214,31 @@ class Bus:
             cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.REAL_TIME
         else:
             cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.DATA
-        pub = self.session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
+        pub: Any
+        if topic.history:
+            # cached and sequenced: subscribers recover what a cut link lost (the
+            # heartbeat tells them within a second of the link's return)
+            pub = zenoh.ext.declare_advanced_publisher(
+                self.session,
+                topic.key,
+                congestion_control=cc,
+                priority=prio,
+                cache=zenoh.ext.CacheConfig(max_samples=topic.history),
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
+                ),
+                publisher_detection=True,
+            )
+        else:
+            pub = self.session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
         self._handles.append(pub)
         return Publisher(pub, topic)
 
-    def subscribe(self, topic: Topic[M], callback: Callable[[M], None]) -> None:
+    def subscribe(self, topic: Topic[M], callback: Callable[[M], object]) -> None:
         """Call ``callback`` with each decoded message on ``topic`` (a key or pattern)."""
-        self.subscribe_raw(topic.key, lambda data: decode(data, topic.type), callback)
+        self.subscribe_raw(
+            topic.key, lambda data: decode(data, topic.type), callback, history=topic.history > 0
+        )
 
     def latest(self, topic: Topic[M]) -> Latest[M]:
         holder: Latest[M] = Latest()
@@ -207,7 +269,7 @@ class Bus:
                     query.reply_err(f"{exc}".encode())
                     return
                 except Exception as exc:
-                    log.exception("handler for %s failed", key)
+                    self._failed(key, "handler")
                     query.reply_err(f"internal error in {self.name}: {exc!r}".encode())
                     return
                 query.reply(query.key_expr, _ENCODER.encode(rep))
@@ -243,10 +305,18 @@ class Bus:
         self.session.put(key, data)
 
     def subscribe_raw(
-        self, key: str, decoder: Callable[[bytes], M], callback: Callable[[M], None]
+        self,
+        key: str,
+        decoder: Callable[[bytes], M],
+        callback: Callable[[M], object],
+        history: bool = False,
     ) -> None:
         """Subscribe to a foreign encoding: ``decoder`` raises on bad bytes (any
-        exception), which is logged once, counted and dropped like a bad message."""
+        exception), which is logged once, counted and dropped like a bad message. A
+        ``callback`` that raises is counted in ``callback_stats`` and its first
+        traceback per key logged; its return value is ignored. With ``history``, the
+        publishers' caches are asked for what was sent before this subscription and
+        for what a cut link lost (each message once)."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:
@@ -257,9 +327,21 @@ class Bus:
             try:
                 callback(msg)
             except Exception:
-                log.exception("subscriber callback for %s failed", key)
+                self._failed(key, "subscriber callback")
 
-        self._handles.append(self.session.declare_subscriber(key, on_sample))
+        if history:
+            self._handles.append(
+                zenoh.ext.declare_advanced_subscriber(
+                    self.session,
+                    key,
+                    on_sample,
+                    history=zenoh.ext.HistoryConfig(detect_late_publishers=True),
+                    recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+                    subscriber_detection=True,
+                )
+            )
+        else:
+            self._handles.append(self.session.declare_subscriber(key, on_sample))
 
     def close(self) -> None:
         for h in reversed(self._handles):

@@ -6,15 +6,16 @@ import enum
 
 import msgspec
 
-from common.messages.core import FileName, Message
+from common.messages.core import FileName, Message, NonNegative
 
 
 class MissionStart(msgspec.Struct, frozen=True, tag=True):
-    """Start a survey: ``plan_file`` (a plan.json path on the mission host) or, when
-    empty, a plan requested from the planner for ``field``."""
+    """Start a survey: ``plan_file`` (a plan.json path on the mission host, inside its
+    run folder) or, when empty, a plan requested from the planner for ``field``,
+    which is the deployment's field when empty and must name it otherwise."""
 
     mission: FileName = ""
-    field: str = "engr"
+    field: str = ""
     plan_file: str = ""
 
 
@@ -57,7 +58,7 @@ class MissionState(Message, frozen=True, kw_only=True):
     scans_failed: int = 0
     scans_total: int = 0
     current_scan: int = 0
-    distance_m: float = 0.0
+    distance_m: NonNegative = 0.0
     detail: str = ""
 
 

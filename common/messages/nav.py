@@ -7,7 +7,14 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Message, NonNegative
+from common.messages.core import (
+    Angle,
+    Coordinate,
+    Finite,
+    Message,
+    NonNegative,
+    Velocity,
+)
 
 
 class PoseEstimate(Message, frozen=True, kw_only=True):
@@ -18,13 +25,13 @@ class PoseEstimate(Message, frozen=True, kw_only=True):
     stops while it is false.
     """
 
-    x: float
-    y: float
-    yaw: float
-    z: float = 0.0
-    v: float = 0.0
-    w: float = 0.0
-    covariance: tuple[float, ...] = (0.0,) * 9
+    x: Coordinate
+    y: Coordinate
+    yaw: Angle
+    z: Coordinate = 0.0
+    v: Velocity = 0.0
+    w: Velocity = 0.0
+    covariance: tuple[Finite, ...] = (0.0,) * 9
     localized: bool = False
 
 
@@ -36,25 +43,44 @@ class Leg(msgspec.Struct, frozen=True, kw_only=True):
     at a scan location.
     """
 
-    x0: float
-    y0: float
-    x1: float
-    y1: float
-    final_yaw: float | None = None
+    x0: Coordinate
+    y0: Coordinate
+    x1: Coordinate
+    y1: Coordinate
+    final_yaw: Angle | None = None
     scan_id: int | None = None
 
 
 class FollowRoute(msgspec.Struct, frozen=True, tag=True):
+    """Follow ``legs``. The route holds for ``lease_s`` seconds (on navigation's clock)
+    and must be renewed (:class:`RenewRoute`) before that, or the robot stops: whoever
+    commands a route supervises it, and a supervisor that dies stops the robot.
+
+    ``join``: start on the first leg that passes within the follower's join distance
+    of the robot instead of the first leg, so a route re-sent after a restart
+    continues where the robot stands rather than driving back to its start."""
+
     route_id: str
     legs: list[Leg]
     max_speed: Annotated[float, msgspec.Meta(gt=0, le=2.0)] = 0.5
+    lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
+    join: bool = False
 
 
 class CancelRoute(msgspec.Struct, frozen=True, tag=True):
     route_id: str = ""
 
 
-NavCommand = FollowRoute | CancelRoute
+class RenewRoute(msgspec.Struct, frozen=True, tag=True):
+    """Extend route ``route_id``'s lease by ``lease_s`` seconds from now. Navigation
+    answers ``accepted=False`` when it does not follow that route (it restarted, or
+    the lease ran out): the supervisor then sends the route again."""
+
+    route_id: str
+    lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
+
+
+NavCommand = FollowRoute | CancelRoute | RenewRoute
 
 
 class NavReply(Message, frozen=True, kw_only=True):
@@ -72,6 +98,9 @@ class NavState(enum.StrEnum):
     WAITING_OBSTACLE = "waiting_obstacle"
     NOT_LOCALIZED = "not_localized"
     CANCELLED = "cancelled"
+    # the route ended without reaching its goal within the arrival tolerance, or its
+    # lease ran out; ``NavProgress.detail`` says which
+    FAILED = "failed"
 
 
 class NavProgress(Message, frozen=True, kw_only=True):
@@ -82,5 +111,6 @@ class NavProgress(Message, frozen=True, kw_only=True):
     leg: int = 0
     legs: int = 0
     distance_to_go: NonNegative = 0.0
-    cross_track: float = 0.0
-    heading_error: float = 0.0
+    cross_track: Finite = 0.0
+    heading_error: Angle = 0.0
+    detail: str = ""

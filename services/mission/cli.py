@@ -27,7 +27,7 @@ FINAL = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
 
 def add_mission_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("action", choices=["start", "pause", "resume", "abort", "status"])
-    p.add_argument("--field", default="engr")
+    p.add_argument("--field", default="", help="the deployment's field (default: its own)")
     p.add_argument("--plan-file", default="", help="a plan.json on the mission's host")
     p.add_argument("--name", default="", help="mission name (default: field and time)")
     p.add_argument("--manifest", type=Path, default=None)
@@ -35,15 +35,23 @@ def add_mission_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def describe(s: MissionState) -> str:
+    """One line: phase, scans, distance; a finished survey that left locations
+    unscanned says how many."""
+    missed = s.scans_total - s.scans_done
     return (
         f"{s.mission or '-'}: {s.phase.value}, {s.scans_done}/{s.scans_total} scans done, "
         f"{s.scans_failed} failed, {s.distance_m:.1f} m driven"
         + (f" ({s.detail})" if s.detail else "")
+        + (
+            f"; {missed} of {s.scans_total} locations NOT scanned"
+            if s.phase == MissionPhase.DONE and missed > 0
+            else ""
+        )
     )
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    from common.cli import open_client
+    from common.cli import connect_or_explain
 
     commands: dict[str, MissionCommand] = {
         "start": MissionStart(mission=args.name, field=args.field, plan_file=args.plan_file),
@@ -53,7 +61,11 @@ def cmd_mission(args: argparse.Namespace) -> int:
         "status": MissionStatusQuery(),
     }
     cmd = commands[args.action]
-    with open_client(args.manifest, args.connect) as session:
+    prog = f"phenorover mission {args.action}"
+    session = connect_or_explain(prog, args.manifest, args.connect, service="mission")
+    if session is None:
+        return 2  # the line saying which endpoint could not be reached is printed
+    with session:
         bus = Bus(session, "cli")
         try:
             print(describe(bus.call(keys.MISSION_CMD, cmd, timeout=330)))
@@ -65,10 +77,16 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_survey(bus: Bus, field: str, timeout: float) -> MissionState | None:
-    """Start a survey and print a line per step until it ends; the final state."""
+def run_survey(
+    bus: Bus, field: str, timeout: float, problems: list[str] | None = None
+) -> MissionState | None:
+    """Start a survey and print a line per step until it ends; the final state (None
+    when it could not start). ``problems`` gets the text of every error event of the
+    mission (a location skipped or failed, and why)."""
+    seen: list[MissionEvent] = []
 
     def on_event(e: MissionEvent) -> None:
+        seen.append(e)
         print(f"  [{e.stamp_ns / 1e9:8.1f} s sim] {e.level}: {e.text}", flush=True)
 
     bus.subscribe(keys.MISSION_EVENT, on_event)
@@ -85,6 +103,7 @@ def run_survey(bus: Bus, field: str, timeout: float) -> MissionState | None:
     print(f"mission {s.mission} started", flush=True)
     last = ""
     end = time.monotonic() + timeout
+    final: MissionState | None = None
     while time.monotonic() < end:
         st = state.wait_for(lambda x: x.mission == s.mission, timeout=2.0)
         if st is None:
@@ -94,7 +113,12 @@ def run_survey(bus: Bus, field: str, timeout: float) -> MissionState | None:
             print(line, flush=True)
             last = line
         if st.phase in FINAL:
-            return st
+            final = st
+            break
         time.sleep(0.5)
-    print(f"phenorover sim: mission not finished after {timeout:.0f} s", file=sys.stderr)
-    return state.get()
+    else:
+        print(f"phenorover sim: mission not finished after {timeout:.0f} s", file=sys.stderr)
+        final = state.get()
+    if problems is not None:
+        problems.extend(e.text for e in list(seen) if e.mission == s.mission and e.level == "error")
+    return final

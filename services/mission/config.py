@@ -18,8 +18,17 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     ``settle_s``: how long the robot must be still (|v| < ``still_speed``, |w| <
     ``still_turn``) and localized before a scan starts. ``scan_retries``: further
     attempts after a scanner error before the location is marked failed.
-    ``blocked_retries``: route attempts after navigation reports blocked before the
-    location is skipped. ``resume``: pick up an unfinished mission found in the run
+    ``blocked_retries``: route attempts after navigation reports blocked (or fails)
+    before the location is skipped. ``arrival_tolerance_m``: how far the pose estimate
+    may be from the planned location, before a scan and averaged over it (the follower
+    arrives to millimetres; 5 cm is a metre-scale fault's margin, not a target);
+    ``position_retries`` drives to get there. ``lease_s``: the route lease navigation
+    holds (renewed every quarter of it; without renewal the robot stops). A route gets
+    ``route_time_s`` plus its length at ``route_min_speed`` before it is given up.
+    ``rpc_timeout_s`` (wall) per call; a service silent for ``rpc_patience_s`` (wall,
+    a restart takes seconds) fails the mission. ``scanner_lost_s``: no status for the
+    scan being taken for this long and the attempt is lost (the scanner restarted).
+    ``resume``: pick up an unfinished mission found in the run
     folder when the service starts. ``register_on_done``: register the scans (``python
     -m services.register RUN_DIR``, a child process at low priority) once the mission
     is done.
@@ -32,7 +41,15 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     scan_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
     scan_timeout_s: Pos = 1800.0
     blocked_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 1
-    route_timeout_s: Pos = 1800.0
+    route_time_s: Pos = 300.0
+    route_min_speed: Pos = 0.05
+    settle_timeout_s: Pos = 900.0
+    arrival_tolerance_m: Pos = 0.05
+    position_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
+    lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600)] = 2.0
+    rpc_timeout_s: Pos = 5.0
+    rpc_patience_s: Pos = 120.0
+    scanner_lost_s: Pos = 10.0
     plan_timeout_s: Pos = 300.0
     return_to_origin: bool = True
     resume: bool = True

@@ -11,7 +11,6 @@ it finished, redone only if it did not).
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from pathlib import Path
@@ -31,55 +30,28 @@ from common.messages.mission import (
     MissionState,
     MissionStatusQuery,
 )
-from common.messages.nav import CancelRoute, FollowRoute, NavState, PoseEstimate
 from common.messages.plan import PlanRequest, PlanResult
-from common.messages.scan import ScannerState, StartScan, StopScan
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
+from services.mission.survey import Aborted, Survey
 from services.register.hook import REGISTERING, RegistrationJob
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0
 
 
-class Aborted(Exception):
-    pass
-
-
-def pose_stats(poses: list[PoseEstimate]) -> dict[str, float]:
-    """Mean and SD of x, y, z and heading (circular) over a scan."""
-    n = max(len(poses), 1)
-    out: dict[str, float] = {}
-    for k in ("x", "y", "z"):
-        v = [getattr(p, k) for p in poses] or [math.nan]
-        m = sum(v) / n
-        out[f"mean_{k}"] = m
-        out[f"sd_{k}"] = math.sqrt(sum((a - m) ** 2 for a in v) / n)
-    c = sum(math.cos(p.yaw) for p in poses) / n
-    s = sum(math.sin(p.yaw) for p in poses) / n
-    out["mean_yaw"] = math.atan2(s, c)
-    out["sd_yaw"] = math.sqrt(max(0.0, -2.0 * math.log(max(math.hypot(c, s), 1e-12))))
-    return out
-
-
 class MissionService:
     def __init__(self, ctx: Context, cfg: MissionConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
         bus = ctx.bus
-        self.pose = bus.latest(keys.NAV_POSE)
-        self.progress = bus.latest(keys.NAV_PROGRESS)
-        self.scanner = bus.latest(keys.SCANNER_STATUS)
         self.state_pub = bus.publisher(keys.MISSION_STATE)
         self.event_pub = bus.publisher(keys.MISSION_EVENT)
         self.plan_pub = bus.publisher(keys.MISSION_PLAN)
         self.plan: PlanResult | None = None
         self._plan_sent = 0.0
-        self._lock = threading.Lock()
-        self._collect: list[PoseEstimate] | None = None
-        bus.subscribe(keys.NAV_POSE, self._on_pose)
         self.log: MissionLog | None = None
         self.mission = ""
         self.phase = MissionPhase.IDLE
@@ -88,16 +60,11 @@ class MissionService:
         self.distance = 0.0
         self._paused = threading.Event()
         self._abort = threading.Event()
+        self._wake = threading.Event()  # abort or stop: ends every wait at once
+        self.survey: Survey | None = None
         self._worker: threading.Thread | None = None
         self._registration: RegistrationJob | None = None
-        self._stop = threading.Event()
         bus.serve(keys.MISSION_CMD, self.handle)
-
-    # --- bus inputs ---
-    def _on_pose(self, p: PoseEstimate) -> None:
-        with self._lock:
-            if self._collect is not None:
-                self._collect.append(p)
 
     def event(self, level: str, text: str) -> None:
         now = self.ctx.clock.now_ns()
@@ -122,7 +89,7 @@ class MissionService:
             scans_total=total,
             current_scan=self.current,
             distance_m=self.distance,
-            detail=self.detail,
+            detail=self.survey.detail if self.survey and self.active else self.detail,
         )
 
     @property
@@ -144,15 +111,29 @@ class MissionService:
                 self.event("info", "resumed by operator")
             case MissionAbort():
                 self._abort.set()
+                self._wake.set()
                 self._paused.clear()
             case MissionStatusQuery():
                 pass
         return self.state()
 
     def _load_plan(self, cmd: MissionStart) -> PlanResult:
+        field = self.ctx.field
+        if cmd.field and cmd.field != field and Path(cmd.field).resolve() != Path(field).resolve():
+            # one field for the whole deployment: the simulated world, the planner and
+            # the mission must agree on what is being surveyed
+            raise RequestError(
+                f"MissionStart.field: {cmd.field!r} is not this deployment's field {field!r}"
+            )
         if cmd.plan_file:
+            path = Path(cmd.plan_file).resolve()
+            if not path.is_relative_to(self.ctx.run_dir.resolve()):
+                raise RequestError(
+                    f"MissionStart.plan_file: {cmd.plan_file} is outside the run folder "
+                    f"{self.ctx.run_dir}"
+                )
             try:
-                return msgspec.json.decode(Path(cmd.plan_file).read_bytes(), type=PlanResult)
+                return msgspec.json.decode(path.read_bytes(), type=PlanResult)
             except OSError as exc:
                 raise RequestError(
                     f"MissionStart.plan_file: {cmd.plan_file}: {exc.strerror}"
@@ -161,7 +142,7 @@ class MissionService:
                 raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc}") from None
         try:
             return self.ctx.bus.call(
-                keys.PLANNER_PLAN, PlanRequest(name=cmd.field), timeout=self.cfg.plan_timeout_s
+                keys.PLANNER_PLAN, PlanRequest(name=field), timeout=self.cfg.plan_timeout_s
             )
         except RpcError as exc:
             raise RequestError(f"planner: {exc}") from None
@@ -186,14 +167,20 @@ class MissionService:
         log.create(
             name, plan.field, self.ctx.clock.now_ns(), msgspec.json.encode(plan).decode(), steps
         )
-        (path.parent / "plan.json").write_bytes(msgspec.json.encode(plan))
+        tmp = path.parent / "plan.json.tmp"
+        tmp.write_bytes(msgspec.json.encode(plan))
+        tmp.replace(path.parent / "plan.json")
         self.plan = plan
         self._launch(name, log, segs)
 
     def _launch(self, name: str, log: MissionLog, segs: list[Segment]) -> None:
         self.mission, self.log = name, log
         self._abort.clear()
+        self._wake.clear()
         self._paused.clear()
+        self.survey = Survey(
+            self.ctx, self.cfg, log, name, self.event, self._wake, self._abort, self._paused
+        )
         self._worker = threading.Thread(target=self._run_mission, args=(segs,), daemon=True)
         self._worker.start()
         self._publish_plan()
@@ -225,149 +212,9 @@ class MissionService:
             log.close()
 
     # --- the survey ---
-    def _wait(self, seconds: float) -> None:
-        if not clk.sleep(self.ctx.clock, seconds, self._stop) or self._abort.is_set():
-            raise Aborted
-        while self._paused.is_set():
-            if not clk.sleep(self.ctx.clock, 0.5, self._stop) or self._abort.is_set():
-                raise Aborted
-
-    def _drive(self, seg: Segment, route_id: str) -> bool:
-        """Follow ``seg``; False if navigation stays blocked."""
-        for attempt in range(self.cfg.blocked_retries + 1):
-            self.ctx.bus.call(
-                keys.NAV_CMD,
-                FollowRoute(route_id=f"{route_id}.{attempt}", legs=seg.legs),
-                timeout=10,
-            )
-            t0 = self.ctx.clock.now_ns()
-            warned = False
-            while True:
-                self._wait(0.2)
-                p = self.progress.get()
-                if p is None or p.route_id != f"{route_id}.{attempt}":
-                    continue
-                if p.state == NavState.ARRIVED:
-                    self.distance += sum(
-                        math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in seg.legs
-                    )
-                    return True
-                if p.state == NavState.BLOCKED:
-                    self.event("warning", f"{route_id}: navigation blocked (attempt {attempt + 1})")
-                    break
-                if p.state == NavState.NOT_LOCALIZED and not warned:
-                    self.event("warning", f"{route_id}: localization lost, waiting")
-                    warned = True
-                elif p.state != NavState.NOT_LOCALIZED and warned:
-                    self.event("info", f"{route_id}: localization back")
-                    warned = False
-                if (self.ctx.clock.now_ns() - t0) / 1e9 > self.cfg.route_timeout_s:
-                    self.ctx.bus.call(keys.NAV_CMD, CancelRoute(route_id=route_id), timeout=10)
-                    self.event("warning", f"{route_id}: no arrival in {self.cfg.route_timeout_s} s")
-                    break
-        return False
-
-    def _settle(self) -> None:
-        """Wait until the robot has been localized throughout the last ``settle_s`` and
-        its mean speed and turn rate over them are below the still thresholds. The
-        mean, not every sample: the estimate's turn rate carries the encoders'
-        0.01 rad/s noise, so single samples cross any tight threshold."""
-        window: list[tuple[int, PoseEstimate]] = []
-        warned = False
-        while True:
-            self._wait(0.1)
-            p = self.pose.get()
-            if p is None:
-                continue
-            now = self.ctx.clock.now_ns()
-            if not p.localized:
-                if not warned:
-                    self.event("warning", "localization lost before a scan: waiting")
-                    warned = True
-                window.clear()
-                continue
-            window.append((now, p))
-            window = [(t, q) for t, q in window if (now - t) / 1e9 <= self.cfg.settle_s]
-            if (now - window[0][0]) / 1e9 < 0.9 * self.cfg.settle_s:
-                continue
-            v = sum(q.v for _, q in window) / len(window)
-            w = sum(q.w for _, q in window) / len(window)
-            if abs(v) < self.cfg.still_speed and abs(w) < self.cfg.still_turn:
-                return
-
-    def _scan(self, idx: int, scan_id: int) -> bool:
-        """One location's scan with retries; records it; False when it failed."""
-        assert self.log is not None
-        step = self.log.steps()[idx]
-        resumed = step.status == "scanning"
-        for attempt in range(step.attempts, self.cfg.scan_retries + 1):
-            st = self.scanner.get()
-            if resumed and st is not None and st.scan_id == scan_id:
-                # the service died during this scan: take what the scanner has
-                resumed = False
-                if st.state in (ScannerState.DONE, ScannerState.SCANNING):
-                    self.event("info", f"scan {scan_id}: found on the scanner after restart")
-                    if self._await_scan(idx, scan_id):
-                        return True
-                    continue
-            resumed = False
-            self.log.update(
-                idx, status="scanning", attempts=attempt + 1, started_ns=self.ctx.clock.now_ns()
-            )
-            prof = msgspec.structs.replace(self.cfg.profile, scan_id=scan_id)
-            try:
-                self.ctx.bus.call(
-                    keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission), timeout=10
-                )
-            except RpcError as exc:
-                self.event("warning", f"scan {scan_id}: start failed: {exc}")
-                self._wait(2.0)
-                continue
-            if self._await_scan(idx, scan_id):
-                return True
-        return False
-
-    def _await_scan(self, idx: int, scan_id: int) -> bool:
-        assert self.log is not None
-        with self._lock:
-            self._collect = []
-        t0 = self.ctx.clock.now_ns()
-        try:
-            while True:
-                self._wait(0.2)
-                st = self.scanner.get()
-                # a status from before this attempt (a retry follows an error for the
-                # same scan id) says nothing about it
-                if st is None or st.scan_id != scan_id or st.stamp_ns < t0:
-                    continue
-                if st.state == ScannerState.DONE:
-                    with self._lock:
-                        poses, self._collect = self._collect or [], None
-                    self.log.update(
-                        idx,
-                        status="done",
-                        file=st.file,
-                        ended_ns=self.ctx.clock.now_ns(),
-                        pitch=st.pitch,
-                        roll=st.roll,
-                        **pose_stats(poses),
-                    )
-                    return True
-                if st.state == ScannerState.ERROR:
-                    self.event("warning", f"scan {scan_id}: scanner error: {st.error}")
-                    self._wait(1.0)
-                    return False
-                if (self.ctx.clock.now_ns() - t0) / 1e9 > self.cfg.scan_timeout_s:
-                    self.event("warning", f"scan {scan_id}: no end in {self.cfg.scan_timeout_s} s")
-                    self.ctx.bus.call(keys.SCANNER_CMD, StopScan(), timeout=10)
-                    return False
-        finally:
-            with self._lock:
-                self._collect = None
-
     def _run_mission(self, segs: list[Segment]) -> None:
-        log = self.log
-        assert log is not None
+        log, sv = self.log, self.survey
+        assert log is not None and sv is not None
         try:
             by_cand = {s.cand_id: s for s in segs if s.cand_id is not None}
             for step in log.steps():
@@ -375,25 +222,19 @@ class MissionService:
                     continue
                 self.current = step.scan_id
                 tag = f"scan {step.scan_id} (location {step.cand_id})"
-                if step.status in ("pending", "driving"):
-                    self.phase, self.detail = MissionPhase.DRIVING, f"to {tag}"
-                    log.update(step.idx, status="driving")
-                    if not self._drive(by_cand[step.cand_id], f"{self.mission}.{step.scan_id}"):
-                        log.update(step.idx, status="skipped", reason="navigation blocked")
-                        self.event("error", f"{tag}: skipped, navigation blocked")
+                if step.status == "scanning":
+                    self.phase = MissionPhase.SETTLING
+                    if sv.found_on_scanner(step):
+                        self.event("info", f"{tag}: done")
                         continue
-                self.phase, self.detail = MissionPhase.SETTLING, tag
-                self._settle()
-                self.phase = MissionPhase.SCANNING
-                if self._scan(step.idx, step.scan_id):
-                    self.event("info", f"{tag}: done")
-                else:
-                    log.update(step.idx, status="failed", reason="scanner error")
-                    self.event("error", f"{tag}: failed after {self.cfg.scan_retries + 1} attempts")
+                self._visit(step.idx, by_cand[step.cand_id], tag)
             home = [s for s in segs if s.cand_id is None]
             if self.cfg.return_to_origin and home:
                 self.phase, self.detail, self.current = MissionPhase.RETURNING, "to Origin", 0
-                self._drive(home[0], f"{self.mission}.home")
+                sv.detail = self.detail
+                ok, why = sv.drive(home[0], f"{self.mission}.home")
+                if not ok:
+                    self.event("error", f"return to the Origin: {why}")
             log.set_state("done")
             self.event("info", f"mission {self.mission} done")
             self.detail = ""
@@ -405,10 +246,37 @@ class MissionService:
                 log.set_state("aborted")
                 self.phase = MissionPhase.ABORTED
                 self.event("warning", f"mission {self.mission} aborted")
-                self.ctx.bus.call(keys.NAV_CMD, CancelRoute(), timeout=5)
+                sv._cancel("")
         except RpcError as exc:
             self.phase, self.detail = MissionPhase.FAILED, str(exc)
             self.event("error", f"mission {self.mission} stopped: {exc}")
+
+    def _visit(self, idx: int, seg: Segment, tag: str) -> None:
+        """Position, scan (with retries, each re-checking the pose), record."""
+        log, sv = self.log, self.survey
+        assert log is not None and sv is not None
+        step = log.steps()[idx]
+        drive = step.status in ("pending", "driving")
+        if drive:
+            log.update(idx, status="driving")
+        why = ""
+        for _ in range(step.attempts, self.cfg.scan_retries + 1):
+            self.phase = MissionPhase.DRIVING if drive else MissionPhase.SETTLING
+            why = sv.position(log.steps()[idx], seg, tag, drive_first=drive)
+            if why:
+                log.update(idx, status="skipped", reason=f"location not reached: {why}")
+                self.event("error", f"{tag}: skipped, location not reached: {why}")
+                return
+            self.phase = MissionPhase.SCANNING
+            prof = msgspec.structs.replace(self.cfg.profile, scan_id=log.steps()[idx].scan_id)
+            why = sv.scan(log.steps()[idx], prof)
+            if not why:
+                self.event("info", f"{tag}: done")
+                return
+            self.event("warning", f"{tag}: {why}")
+            drive = False  # position() drives again when the robot is off
+        log.update(idx, status="failed", reason=why)
+        self.event("error", f"{tag}: failed after {self.cfg.scan_retries + 1} attempts: {why}")
 
     # --- registration at the end (see services/register/hook.py for why here) ---
     def _register(self) -> None:
@@ -430,13 +298,15 @@ class MissionService:
         self.event("info", f"{REGISTERING} the scans: log in {job.log_path}")
 
     def run(self, stop: threading.Event) -> None:
-        self._stop = stop
         if self.cfg.resume:
             self.resume_unfinished()
         for _ in clk.ticks(self.ctx.clock, 1.0, stop):
             self.state_pub.put(self.state())
             if time.monotonic() - self._plan_sent >= PLAN_REPUBLISH_S:
                 self._publish_plan()
+        self._wake.set()
+        if self._worker is not None:
+            self._worker.join(timeout=2.0)
         if self._registration is not None:
             self._registration.stop()
         if self.log is not None:

@@ -43,3 +43,11 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     obstacle_min_points: Annotated[int, msgspec.Meta(ge=1)] = 3
     obstacle_scans: Annotated[int, msgspec.Meta(ge=1)] = 2
     still_after_s: Pos = 1.0
+    # the dead-reckoning allowance: with no RTK-fixed position fused for this long the
+    # robot is not localized and stops. 0.25 s (one fix at 10 Hz may go missing) at
+    # 0.5 m/s is 0.125 m on odometry (a millimetre of drift); braking from 0.5 m/s
+    # at the Husky's 1 m/s^2 with the drivetrain's 0.15 s lag takes another 0.6 s, so
+    # the robot is below 2 cm/s within 1 s of the last fix. A sim running many times
+    # faster than real time needs more: a fix late by 50 ms of wall time is late by
+    # 0.5 s of sim time at 10x (deploy/sim.toml says so).
+    max_fix_age_s: Pos = 0.25

@@ -15,13 +15,20 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+from collections.abc import Callable
 from typing import Annotated
 
 import msgspec
 
 from common.geo import wrap_angle
 from common.messages.nav import Leg, NavState
-from services.nav.pursuit import along_remaining, cross_track, curvature, lookahead_point
+from services.nav.pursuit import (
+    along_remaining,
+    cross_track,
+    curvature,
+    lookahead_point,
+    segment_distance,
+)
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
@@ -67,6 +74,13 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     reapproach_speed: Pos = 0.05
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
     reapproach_tolerance_m: Pos = 0.004
+    # arrival is declared only within this distance of the route's end (and within
+    # ``heading_tolerance_deg`` of its planned heading); else the route fails: a scan
+    # must never be taken where the robot merely stopped
+    arrival_tolerance_m: Pos = 0.05
+    # a route sent with ``join`` starts on the first leg passing this close to the
+    # robot (lanes are 1.8 m apart or more, so a neighbouring lane never qualifies)
+    join_distance_m: Pos = 0.5
 
 
 class Phase(enum.Enum):
@@ -114,14 +128,42 @@ class Follower:
         self._settle = cfg.fine_settle_s  # how long to stand before the next check
         self._turns = 0
         self._backup_to = 0.0  # distance behind the goal a back-up ends at (m)
+        self.lease_until = math.inf
+        self._join = False
+        self.end_detail = ""  # how the last route ended (arrival or failure), for progress
 
-    def start(self, route_id: str, legs: list[Leg], max_speed: float | None = None) -> None:
+    def start(
+        self,
+        route_id: str,
+        legs: list[Leg],
+        max_speed: float | None = None,
+        lease_until: float = math.inf,
+        join: bool = False,
+    ) -> None:
+        """Follow ``legs`` until ``lease_until`` (seconds, the clock of :meth:`step`)
+        unless renewed; with ``join``, start on the first leg passing within
+        ``join_distance_m`` of the robot, decided at the first localized step (a
+        restarted navigation is not localized yet when the route is sent again)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
+        self.lease_until = lease_until
+        self._join = join
+        self.end_detail = ""
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
         self._moves, self._turns, self._creep, self._reapproaches = 0, 0, None, 0
         self.speed_limit = min(self.cfg.max_speed, max_speed or self.cfg.max_speed)
         self._blocked_since = None
+
+    def renew(self, route_id: str, lease_until: float) -> bool:
+        """Extend the lease of route ``route_id``; False when it is not this follower's
+        route (navigation restarted, or another route replaced it), and the supervisor
+        sends it again. A route that has ended stays renewable: its outcome is in the
+        progress the supervisor reads."""
+        if route_id != self.route_id:
+            return False
+        if self.active:
+            self.lease_until = max(self.lease_until, lease_until)
+        return True
 
     def cancel(self) -> None:
         if self.state not in (NavState.IDLE, NavState.ARRIVED, NavState.BLOCKED):
@@ -159,19 +201,37 @@ class Follower:
         self._t = t
         if not self.active or not self.legs:
             self._v = self._w = 0.0
-            return Command(0.0, 0.0, self.state, self.leg, 0.0, 0.0, 0.0)
+            # how the route ended stays in every progress message after the end
+            return Command(0.0, 0.0, self.state, self.leg, 0.0, 0.0, 0.0, "", self.end_detail)
         leg = self.legs[self.leg]
         heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
         xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
         herr = wrap_angle(yaw - heading)
         togo = self._remaining(x, y)
 
-        def out(v: float, w: float, state: NavState, event: str = "") -> Command:
+        def out(v: float, w: float, state: NavState, event: str = "", why: str = "") -> Command:
             self._v, self._w, self.state = v, w, state
-            return Command(v, w, state, self.leg, togo, xte, herr, event)
+            if why:
+                self.end_detail = why
+            return Command(v, w, state, self.leg, togo, xte, herr, event, why)
 
+        if t > self.lease_until:
+            return out(0.0, 0.0, NavState.FAILED, "failed", "lease expired: no supervisor")
         if not localized:
             return out(0.0, 0.0, NavState.NOT_LOCALIZED)
+        if self._join:
+            self._join = False
+            near = [
+                k
+                for k, lg in enumerate(self.legs)
+                if segment_distance(x, y, lg.x0, lg.y0, lg.x1, lg.y1) <= self.cfg.join_distance_m
+            ]
+            self.leg = near[0] if near else 0
+            leg = self.legs[self.leg]
+            heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
+            xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
+            herr = wrap_angle(yaw - heading)
+            togo = self._remaining(x, y)
         tol = math.radians(self.cfg.heading_tolerance_deg)
         if self.phase == Phase.ALIGN:
             if _leg_len(leg) <= self.cfg.goal_tolerance_m or abs(herr) <= tol:
@@ -245,11 +305,9 @@ class Follower:
             v, w = self._fine(t, ahead, ferr)
             if v or w or t - self._still_since < self._settle:
                 return out(v, w, NavState.POSITIONING)
-            c = out(0.0, 0.0, NavState.ARRIVED, "arrived")
-            c.detail = (
-                f"{1000 * ahead:+.1f} mm along, {1000 * xte:+.1f} mm across, "
-                f"{math.degrees(ferr):+.2f} deg off the planned pose by the estimate "
-                f"({self._moves} creeps, {self._turns} turns, {self._reapproaches} re-approaches)"
+            c = self._arrive(out, x, y, ferr)
+            c.detail += (
+                f" ({self._moves} creeps, {self._turns} turns, {self._reapproaches} re-approaches)"
             )
             return c
         # FINAL: rotate in place to the next leg's heading
@@ -261,7 +319,20 @@ class Follower:
             self.leg += 1
             self.phase = Phase.ALIGN
             return out(0.0, 0.0, NavState.DRIVING)
-        return out(0.0, 0.0, NavState.ARRIVED, "arrived")
+        yaw_goal = leg.final_yaw if leg.final_yaw is not None else heading
+        return self._arrive(out, x, y, wrap_angle(yaw - yaw_goal) if _leg_len(leg) > 0 else 0.0)
+
+    def _arrive(self, out: Callable[..., Command], x: float, y: float, yaw_err: float) -> Command:
+        """ARRIVED when the estimate is within the arrival tolerances of the route's
+        end, FAILED (saying how far off) otherwise."""
+        leg = self.legs[-1]
+        off = math.hypot(leg.x1 - x, leg.y1 - y)
+        what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"
+        if off <= self.cfg.arrival_tolerance_m and abs(yaw_err) <= math.radians(
+            self.cfg.heading_tolerance_deg
+        ):
+            return out(0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
+        return out(0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")
 
     def _fine(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
         """One step of fine positioning at the goal, ``rem`` metres short of it along

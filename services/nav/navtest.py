@@ -86,7 +86,9 @@ def _follow(bus: Bus, rec: Recorder, legs: list[Leg], route_id: str, timeout: fl
     deadline = time.monotonic() + 15
     while True:
         try:
-            bus.call(keys.NAV_CMD, FollowRoute(route_id=route_id, legs=legs), timeout=2)
+            # an experiment watched by its operator: a lease as long as the run
+            route = FollowRoute(route_id=route_id, legs=legs, lease_s=3600.0)
+            bus.call(keys.NAV_CMD, route, timeout=2)
             break
         except RpcError:
             if time.monotonic() > deadline:

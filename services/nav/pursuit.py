@@ -63,3 +63,11 @@ def along_remaining(x: float, y: float, x0: float, y0: float, x1: float, y1: flo
     if seg < 1e-9:
         return 0.0
     return ((x1 - x) * dx + (y1 - y) * dy) / seg
+
+
+def segment_distance(x: float, y: float, x0: float, y0: float, x1: float, y1: float) -> float:
+    """Distance from (x, y) to the closed segment (x0,y0)-(x1,y1)."""
+    dx, dy = x1 - x0, y1 - y0
+    seg2 = dx * dx + dy * dy
+    u = 0.0 if seg2 < 1e-18 else max(0.0, min(1.0, ((x - x0) * dx + (y - y0) * dy) / seg2))
+    return math.hypot(x - (x0 + u * dx), y - (y0 + u * dy))

@@ -21,6 +21,7 @@ from common.messages.nav import (
     NavReply,
     NavState,
     PoseEstimate,
+    RenewRoute,
 )
 from common.service import Context
 from services.nav.config import NavConfig
@@ -39,6 +40,7 @@ class NavService:
         self._obstacle = False
         self._obstacle_run = 0  # consecutive scans with an obstacle in the box
         self._moving_until = 0.0  # time of the last non-zero velocity command (s)
+        self._last_fix = -math.inf  # time of the last fused fix (s)
         bus = ctx.bus
         self.pose_pub = bus.publisher(keys.NAV_POSE)
         self.progress_pub = bus.publisher(keys.NAV_PROGRESS)
@@ -49,6 +51,9 @@ class NavService:
         bus.subscribe(keys.GNSS_HEADING, self._on_heading)
         bus.subscribe(keys.BASE_SCAN, self._on_scan)
         bus.serve(keys.NAV_CMD, self.handle)
+        c = self.loc.counters
+        bus.report("ekf_rejected", lambda: c.rejected)
+        bus.report("ekf_resets", lambda: c.resets)
 
     def _on_odom(self, m: Odometry) -> None:
         t = m.stamp_ns / 1e9
@@ -70,7 +75,10 @@ class NavService:
         lever = self.cfg.antenna_levers[m.antenna - 1]
         t = m.stamp_ns / 1e9
         with self._lock:
-            self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever)
+            if self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever):
+                # only a fix the filter took counts: a refused one stamped far in
+                # the future must not keep the robot "localized" for ever
+                self._last_fix = max(self._last_fix, t)
             # the antennas sit symmetrically about base_link, so their mean height less
             # the mast is base_link's on a pitched robot too (to 1 - cos(tilt))
             self.loc.update_height(t, float(z) - self.cfg.antenna_height_m, float(cov3[2, 2]))
@@ -117,15 +125,33 @@ class NavService:
 
     def handle(self, cmd: NavCommand) -> NavReply:
         now = self.ctx.clock.now_ns()
+        t = now / 1e9
         with self._lock:
             match cmd:
-                case FollowRoute(route_id=rid, legs=legs, max_speed=vmax):
-                    self.follower.start(rid, legs, vmax)
-                    self.ctx.log.info("route %s: %d legs", rid, len(legs))
+                case FollowRoute(route_id=rid, legs=legs, max_speed=vmax, lease_s=lease):
+                    self.follower.start(rid, legs, vmax, lease_until=t + lease, join=cmd.join)
+                    self.ctx.log.info(
+                        "route %s: %d legs, from leg %d", rid, len(legs), self.follower.leg
+                    )
+                case RenewRoute(route_id=rid, lease_s=lease):
+                    if not self.follower.renew(rid, t + lease):
+                        return NavReply(
+                            stamp_ns=now,
+                            accepted=False,
+                            reason=f"route {rid} is not being followed "
+                            f"(now: {self.follower.route_id or 'none'}, {self.follower.state})",
+                        )
                 case CancelRoute():
                     self.follower.cancel()
                     self.ctx.log.info("route %s cancelled", self.follower.route_id)
         return NavReply(stamp_ns=now, accepted=True)
+
+    def _localized(self, t: float) -> bool:
+        """Localized: the filter's uncertainty is within bounds *and* a fix was fused
+        within ``max_fix_age_s``. Odometry alone carries the pose that long (the stated
+        dead-reckoning allowance); without the age rule the filter's sigma grows past
+        its bound only seconds into an RTK outage, metres later."""
+        return self.loc.localized() and t - self._last_fix <= self.cfg.max_fix_age_s
 
     def run(self, stop: threading.Event) -> None:
         was_active = False
@@ -134,7 +160,7 @@ class NavService:
             with self._lock:
                 self.loc.predict(t)
                 x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
-                localized = self.loc.localized()
+                localized = self._localized(t)
                 cmd = self.follower.step(t, x[0], x[1], x[2], localized, self._obstacle)
                 active = self.follower.active
                 if cmd.v or cmd.w:
@@ -171,10 +197,11 @@ class NavService:
                         distance_to_go=cmd.distance_to_go,
                         cross_track=cmd.cross_track,
                         heading_error=cmd.heading_error,
+                        detail=cmd.detail,
                     )
                 )
             if cmd.event:
-                level = "warning" if cmd.state == NavState.BLOCKED else "info"
+                level = "info" if cmd.state == NavState.ARRIVED else "warning"
                 getattr(self.ctx.log, level)(
                     "route %s: %s%s", route_id, cmd.event, f": {cmd.detail}" if cmd.detail else ""
                 )

@@ -19,7 +19,9 @@ def test_watchdog_and_estop(
 ) -> None:
     wheels = client_bus.latest(keys.SIM_WHEELS)
     odom = client_bus.latest(keys.BASE_ODOM)
-    procs.service("services.base", router_endpoint, log=tmp_path / "base.log")
+    procs.service(
+        "services.base", router_endpoint, "--set", "backend=sim", log=tmp_path / "base.log"
+    )
     assert wait_alive(client_bus.session, {"base"}, timeout=20)
     cmd = client_bus.publisher(keys.BASE_CMD_VEL)
     assert cmd.wait_matched(10)
@@ -34,10 +36,11 @@ def test_watchdog_and_estop(
         cmd.put(Twist(linear_x=0.4))
         time.sleep(0.1)
     assert all(w.v == 0.4 for w in seen[n0 : len(seen) - 2]), "wheels stopped while commanded"
-    # then silence: stopped within the 0.5 s watchdog (plus one 20 ms control tick)
+    # then silence: stopped by the 0.25 s watchdog (counted from the last command,
+    # 0.1 s before t0, plus one 20 ms control tick)
     t0 = time.monotonic()
     assert wheels.wait_for(lambda w: w.v == 0.0, timeout=2.0)
-    assert 0.3 < time.monotonic() - t0 < 1.0
+    assert 0.1 < time.monotonic() - t0 < 1.0
 
     # an e-stop wins over fresh commands
     estop = client_bus.publisher(keys.BASE_ESTOP)

@@ -4,6 +4,7 @@ resume from a second process, a malformed plan."""
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import signal
@@ -20,6 +21,8 @@ from common import keys
 from common.cli import wait_alive
 from common.config import zenoh_config
 from common.messages.mission import MissionPhase, MissionStart, MissionState
+from common.messages.nav import NavState
+from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
 from services.mission.log import MissionLog
 from tests.conftest import REPO, Procs, free_port
@@ -42,16 +45,22 @@ listen = ["tcp/127.0.0.1:{self.port}"]
 [services.sim]
 real_time_factor = 20.0
 [services.gnss]
+backend = "sim"
 [services.base]
+backend = "sim"
+watchdog_s = 1.0  # safety timers run on sim time: 1 s is 50 ms of wall time at 20x
 [services.scanner]
+backend = "sim"
 storage_dir = "{tmp / "card"}"
 sim_scan_time_s = 20.0
 render_step_deg = 1.0
 status_timeout_s = 40.0  # sim seconds: 2 s of wall time at 20x on two busy cores
 [services.nav]
+max_fix_age_s = 3.0  # on sim time too: 0.15 s of wall time at 20x
 [services.planner]
 [services.mission]
 settle_s = 1.0
+lease_s = 20.0  # renewed every 5 s of sim time: 0.25 s of wall time at 20x
 {extra}""")
         self.log = tmp / "up.log"
         self.up = procs.start("-m", "common.cli", "up", str(manifest), log=self.log)
@@ -104,11 +113,16 @@ def test_complete_mission_with_pause_and_resume_from_another_process(
     deployment: Deployment,
 ) -> None:
     d = deployment
-    bad = d.tmp / "bad.json"
+    d.runs.mkdir(exist_ok=True)
+    bad = d.runs / "bad.json"
     bad.write_text('{"field": "tiny"}')
     with pytest.raises(RpcError, match=r"MissionStart\.plan_file: .*bad\.json"):
         d.start(plan_file=str(bad))
-    assert not d.runs.exists() or not list(d.runs.iterdir()), "a malformed plan started something"
+    with pytest.raises(RpcError, match=r"MissionStart\.plan_file: .* outside the run folder"):
+        d.start(plan_file="/etc/passwd")
+    with pytest.raises(RpcError, match=r"MissionStart\.field: .* not this deployment's field"):
+        d.bus.call(keys.MISSION_CMD, MissionStart(field="spl"), timeout=60)
+    assert not list(d.runs.glob("*/mission.db")), "a malformed plan started something"
 
     s = d.start()
     assert s.scans_total == 3
@@ -174,6 +188,48 @@ def test_failing_scanner_marks_the_location_failed_and_goes_on(deployment: Deplo
     assert final.scans_done == 2 and final.scans_failed == 1
     steps = db(d, s.mission).steps()
     assert [st.status for st in steps] == ["done", "failed", "done"]
-    assert steps[1].attempts == 2 and steps[1].reason == "scanner error"
+    assert steps[1].attempts == 2 and (steps[1].reason or "").startswith("scanner error")
     events = [text for _, _, text in db(d, s.mission).events()]
     assert any("scan 2" in t and "failed" in t for t in events)
+
+
+def true_stops(d: Deployment, mission: str, truth: list[TruthPose]) -> list[float]:
+    """Per scan, the largest distance (m) of the true pose during the scan from the
+    planned location: the true pose decides whether a scan is where it belongs."""
+    out = []
+    for st in db(d, mission).steps():
+        assert st.started_ns is not None and st.ended_ns is not None
+        during = [t for t in truth if st.started_ns <= t.stamp_ns <= st.ended_ns]
+        assert during, f"no truth during scan {st.scan_id}"
+        out.append(max(math.hypot(t.x - st.x, t.y - st.y) for t in during))
+    return out
+
+
+@pytest.mark.parametrize(
+    ("service", "phase"),
+    [("nav", MissionPhase.DRIVING), ("scanner", MissionPhase.SCANNING)],
+)
+def test_a_service_killed_mid_survey_is_restarted_and_the_survey_completes(
+    deployment: Deployment, service: str, phase: MissionPhase
+) -> None:
+    d = deployment
+    truth: list[TruthPose] = []
+    d.bus.subscribe(keys.SIM_TRUTH, truth.append)
+    progress = d.bus.latest(keys.NAV_PROGRESS)
+    s = d.start()
+    d.wait(lambda x: x.phase == phase and x.current_scan == 2)
+    if service == "nav":  # on the way, not before the route is sent
+        assert progress.wait_for(
+            lambda p: f".{2}." in p.route_id and p.state == NavState.DRIVING, timeout=60
+        )
+    pid = next(a.pid for a in wait_alive(d.session, {service}, 10) if a.service == service)
+    os.kill(pid, signal.SIGKILL)
+    final = d.wait(lambda x: x.mission == s.mission and x.phase == MissionPhase.DONE)
+    assert final.scans_done == 3 and final.scans_failed == 0, final
+    steps = db(d, s.mission).steps()
+    assert [st.status for st in steps] == ["done"] * 3
+    assert sorted(set(d.scans_started())) == [1, 2, 3]
+    off = true_stops(d, s.mission, truth)
+    assert max(off) <= 0.05, f"true pose during the scans off the plan by {off} m"
+    if service == "nav":  # the restarted navigation got the route again, joined mid-way
+        assert "sending it again" in d.log.read_text()

@@ -4,17 +4,24 @@ the stop when localization is lost."""
 from __future__ import annotations
 
 import math
+import os
 import signal
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 from common import keys
 from common.cli import wait_alive
+from common.keys import Topic
 from common.messages.nav import FollowRoute, Leg, NavState
+from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
 from tests.conftest import Procs
 
 SIM = ("--clock", "sim", "--field", "engr")
+M = TypeVar("M")
 
 
 def start_world(
@@ -23,8 +30,8 @@ def start_world(
     pids = {}
     for name, sets in (
         ("sim", ["real_time_factor=4.0", *sim_sets]),
-        ("base", []),
-        ("gnss", []),
+        ("base", ["backend=sim"]),
+        ("gnss", ["backend=sim"]),
         ("nav", nav_sets),
     ):
         args = [a for s in sets for a in ("--set", s)]
@@ -39,7 +46,9 @@ def send_route(bus: Bus, legs: list[Leg]) -> None:
     deadline = time.monotonic() + 10
     while True:
         try:
-            assert bus.call(keys.NAV_CMD, FollowRoute(route_id="r", legs=legs), timeout=2).accepted
+            assert bus.call(
+                keys.NAV_CMD, FollowRoute(route_id="r", legs=legs, lease_s=3600.0), timeout=2
+            ).accepted
             return
         except RpcError:
             assert time.monotonic() < deadline
@@ -68,25 +77,108 @@ def test_obstacle_stop_then_blocked(
     assert t2 is not None and t2.x > 24.15 + 0.495 and abs(t2.v) < 0.02
 
 
-def test_losing_localization_stops_the_robot(
+# standing: below 2 cm/s the drivetrain's 0.15 s lag leaves under 3 mm to roll
+STILL = 0.02
+
+
+def first_still_after(truth: list[TruthPose], t_ns: int) -> TruthPose | None:
+    return next((t for t in truth if t.stamp_ns >= t_ns and abs(t.v) < STILL), None)
+
+
+class Record(list[M]):
+    """Every message on a topic, and a wait for one that satisfies a predicate."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cond = threading.Condition()
+
+    def add(self, m: M) -> None:
+        with self.cond:
+            self.append(m)
+            self.cond.notify_all()
+
+    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
+        with self.cond:
+            self.cond.wait_for(lambda: any(pred(m) for m in self[-50:]), timeout)
+            return next((m for m in reversed(self) if pred(m)), None)
+
+
+def record(bus: Bus, topic: Topic[M]) -> Record[M]:
+    out: Record[M] = Record()
+    bus.subscribe(topic, out.add)
+    return out
+
+
+def test_losing_rtk_stops_the_robot_within_a_second(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
-    pids = start_world(
-        procs, router_endpoint, client_bus, tmp_path, [], ["ekf.localized_sigma_m=0.03"]
-    )
-    truth = client_bus.latest(keys.SIM_TRUTH)
+    pids = start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
+    truth = record(client_bus, keys.SIM_TRUTH)
+    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
+    fixes = record(client_bus, keys.GNSS_FIX.at(antenna=1))
     progress = client_bus.latest(keys.NAV_PROGRESS)
     send_route(client_bus, WEST)
     assert progress.wait_for(
-        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.5, timeout=60
+        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.0, timeout=60
     )
-    import os
-
-    os.kill(pids["gnss"], signal.SIGKILL)  # no more fixes: the covariance must grow
-    lost = progress.wait_for(lambda p: p.state == NavState.NOT_LOCALIZED, timeout=60)
+    os.kill(pids["gnss"], signal.SIGKILL)  # no more fixes
+    killed = truth[-1].stamp_ns
+    lost = progress.wait_for(lambda p: p.state == NavState.NOT_LOCALIZED, timeout=30)
     assert lost is not None
-    stopped = truth.wait_for(lambda t: abs(t.v) < 0.01 and abs(t.w) < 0.01, timeout=20)
-    assert stopped is not None and stopped.x > 19.6, stopped
-    pose = client_bus.latest(keys.NAV_POSE).wait_for(lambda p: True, timeout=5)
-    assert pose is not None and not pose.localized
-    assert math.sqrt(max(pose.covariance[0], pose.covariance[4])) > 0.03
+    last_fix = fixes[-1].stamp_ns
+    moving = [t for t in truth if t.stamp_ns <= last_fix][-1]
+    assert abs(moving.v) > 0.2, "the robot was not driving when the fixes stopped"
+    assert truth.wait_for(lambda t: t.stamp_ns > killed and abs(t.v) < STILL, timeout=20)
+    still = first_still_after(truth, last_fix)
+    assert still is not None
+    assert (still.stamp_ns - last_fix) / 1e9 <= 1.0, (still.stamp_ns - last_fix) / 1e9
+    assert math.hypot(still.x - moving.x, still.y - moving.y) <= 0.5
+
+
+def test_a_route_not_renewed_stops_the_robot(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
+    truth = record(client_bus, keys.SIM_TRUTH)
+    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
+    progress = client_bus.latest(keys.NAV_PROGRESS)
+    client_bus.call(keys.NAV_CMD, FollowRoute(route_id="leased", legs=WEST, lease_s=12.0))
+    failed = progress.wait_for(
+        lambda p: p.route_id == "leased" and p.state == NavState.FAILED, timeout=60
+    )
+    assert failed is not None and failed.detail.startswith("lease expired"), failed
+    # the robot turns to the leg (about 5 s) and drives off before the lease ends
+    assert max(abs(t.v) for t in truth) > 0.2, "the robot never drove"
+    assert truth.wait_for(lambda t: t.stamp_ns > failed.stamp_ns and abs(t.v) < STILL, timeout=20)
+    still = first_still_after(truth, failed.stamp_ns)
+    # braking from 0.5 m/s at 1 m/s^2 through a 0.15 s lag: about 0.6 s
+    assert still is not None and (still.stamp_ns - failed.stamp_ns) / 1e9 <= 1.0
+
+
+def test_navigation_killed_while_driving_the_base_stops_the_wheels(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    pids = start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
+    truth = record(client_bus, keys.SIM_TRUTH)
+    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
+    cmds = record(client_bus, keys.BASE_CMD_VEL)
+    progress = client_bus.latest(keys.NAV_PROGRESS)
+    send_route(client_bus, WEST)
+    assert progress.wait_for(
+        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.0, timeout=60
+    )
+    os.kill(pids["nav"], signal.SIGKILL)
+    assert truth and cmds, (len(truth), len(cmds))
+    killed = truth[-1].stamp_ns
+    assert truth.wait_for(lambda t: t.stamp_ns > killed and abs(t.v) < STILL, timeout=20)
+    last_cmd = cmds[-1].stamp_ns
+    moving = [t for t in truth if t.stamp_ns <= last_cmd][-1]
+    assert abs(moving.v) > 0.2
+    still = first_still_after(truth, last_cmd)
+    assert still is not None
+    # the watchdog trips 0.25 s after the last command; braking from 0.5 m/s at the
+    # sim's 1 m/s^2 through a 0.15 s lag takes about 0.6 s and 0.15 m more, and truth
+    # comes at 10 Hz: 1.2 s bounds it with a scheduling hiccup to spare (the issue's
+    # 0.5 s is below the braking time alone; see the README's fault table)
+    assert (still.stamp_ns - last_cmd) / 1e9 <= 1.2, (still.stamp_ns - last_cmd) / 1e9
+    assert math.hypot(still.x - moving.x, still.y - moving.y) <= 0.3

@@ -1,0 +1,332 @@
+"""The survey loop: drive to each location, check the pose, scan, record, go on.
+
+Every wait has a deadline on the mission's clock and wakes at once on abort or stop.
+Routes are leased: the loop renews its route while it waits, so a mission that dies
+stops the robot, and a navigation that restarted (it no longer knows the route) gets
+the route again, joined where the robot stands. A scan is taken only where the pose
+estimate is within ``arrival_tolerance_m`` of the planned location, checked before
+every attempt (a resumed one included) and over the scan itself; a scan whose
+recorded pose is off is not ``done``. An RPC that times out (its service restarting)
+is retried for ``rpc_patience_s``; only an error reply or that much silence fails.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+from common import clock as clk
+from common import keys
+from common.keys import Rpc
+from common.messages.nav import (
+    CancelRoute,
+    FollowRoute,
+    NavProgress,
+    NavReply,
+    NavState,
+    PoseEstimate,
+    RenewRoute,
+)
+from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
+from common.service import Context
+from common.transport import Latest, RpcError, RpcTimeout
+from services.mission.config import MissionConfig
+from services.mission.log import MissionLog, Step
+from services.mission.plan import Segment
+from services.mission.stats import pose_stats
+
+Q = TypeVar("Q")
+R = TypeVar("R")
+NS = 1_000_000_000
+SKEW_NS = NS // 5
+LEASE = "lease"  # how navigation's detail of an expired route begins
+
+
+class Aborted(Exception):
+    """The operator aborted, or the service is stopping."""
+
+
+class Survey:
+    """Runs one mission's steps. ``wake`` is set on abort and on stop; ``abort`` and
+    ``paused`` are the operator's; ``event(level, text)`` reports."""
+
+    def __init__(
+        self,
+        ctx: Context,
+        cfg: MissionConfig,
+        log: MissionLog,
+        mission: str,
+        event: Callable[[str, str], None],
+        wake: threading.Event,
+        abort: threading.Event,
+        paused: threading.Event,
+    ) -> None:
+        self.ctx, self.cfg, self.log, self.event = ctx, cfg, log, event
+        self.mission = mission
+        self.wake, self.abort, self.paused = wake, abort, paused
+        bus = ctx.bus
+        self.pose: Latest[PoseEstimate] = bus.latest(keys.NAV_POSE)
+        self.progress: Latest[NavProgress] = bus.latest(keys.NAV_PROGRESS)
+        self.scanner: Latest[ScannerStatus] = bus.latest(keys.SCANNER_STATUS)
+        self._lock = threading.Lock()
+        self._collect: list[PoseEstimate] | None = None
+        bus.subscribe(keys.NAV_POSE, self._on_pose)
+        self.detail = ""
+        self._routes = 0
+
+    def _on_pose(self, p: PoseEstimate) -> None:
+        with self._lock:
+            if self._collect is not None:
+                self._collect.append(p)
+
+    def now(self) -> int:
+        return self.ctx.clock.now_ns()
+
+    # --- waiting and calling ---
+    def wait(self, seconds: float) -> int:
+        """Wait ``seconds`` on the clock, and while paused; returns the time spent
+        paused (ns), for deadlines that must not count it. Raises Aborted."""
+        if not clk.sleep(self.ctx.clock, seconds, self.wake):
+            raise Aborted
+        t0 = self.now()
+        while self.paused.is_set():
+            if not clk.sleep(self.ctx.clock, 0.5, self.wake):
+                raise Aborted
+        return self.now() - t0
+
+    def call(self, rpc: Rpc[Q, R], req: Q) -> R:
+        """``rpc`` answered, retried while its service is silent (restarting) for up
+        to ``rpc_patience_s`` of wall time. Raises RpcError on an error reply or on
+        that much silence, Aborted on abort or stop."""
+        deadline = time.monotonic() + self.cfg.rpc_patience_s
+        warned = False
+        while True:
+            try:
+                return self.ctx.bus.call(rpc, req, timeout=self.cfg.rpc_timeout_s)
+            except RpcTimeout:
+                if time.monotonic() > deadline:
+                    raise
+                if not warned:
+                    self.event("warning", f"{rpc.key}: no answer, retrying")
+                    warned = True
+            if self.wake.wait(0.5):
+                raise Aborted
+
+    # --- driving ---
+    def drive(self, seg: Segment, route_id: str) -> tuple[bool, str]:
+        """Follow ``seg`` (joined where the robot stands); (arrived, why not)."""
+        length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in seg.legs)
+        limit_ns = int((self.cfg.route_time_s + length / self.cfg.route_min_speed) * NS)
+        why = ""
+        for attempt in range(self.cfg.blocked_retries + 1):
+            # every route sent gets a new id: navigation keeps publishing an ended
+            # route's outcome, which must never be taken for a later route's
+            self._routes += 1
+            rid = f"{route_id}.{self._routes}"
+            ok, why = self._follow(seg, rid, limit_ns)
+            if ok:
+                return True, ""
+            self.event("warning", f"{route_id}: {why} (attempt {attempt + 1})")
+        return False, why
+
+    def _send(self, seg: Segment, rid: str) -> int:
+        """Send the route; the clock time it was sent at."""
+        route = FollowRoute(route_id=rid, legs=seg.legs, lease_s=self.cfg.lease_s, join=True)
+        sent = self.now()
+        rep: NavReply = self.call(keys.NAV_CMD, route)
+        if not rep.accepted:
+            raise RpcError(f"navigation refused route {rid}: {rep.reason}")
+        return sent
+
+    def _follow(self, seg: Segment, rid: str, limit_ns: int) -> tuple[bool, str]:
+        sent = renewed = t0 = self._send(seg, rid)
+        warned = False
+        while True:
+            t0 += self.wait(0.1)
+            now = self.now()
+            if now - t0 > limit_ns:
+                self._cancel(rid)
+                return False, f"no arrival in {limit_ns / NS:.0f} s"
+            p = self.progress.get()
+            # progress of this route since it was (last) sent; services on a sim clock
+            # follow it a tick or two apart
+            if p is not None and p.route_id == rid and p.stamp_ns >= sent - SKEW_NS:
+                if p.state == NavState.ARRIVED:
+                    return True, ""
+                if p.state == NavState.BLOCKED:
+                    return False, "navigation blocked"
+                if p.state == NavState.FAILED and not p.detail.startswith(LEASE):
+                    return False, f"navigation failed: {p.detail}"
+                if p.state == NavState.FAILED:  # held up past the lease (paused, say)
+                    self.event("warning", f"{rid}: lease ran out, sending the route again")
+                    sent = renewed = self._send(seg, rid)
+                    continue
+                lost = p.state == NavState.NOT_LOCALIZED
+                if lost != warned:
+                    text = "lost, waiting" if lost else "back"
+                    self.event("warning" if lost else "info", f"{rid}: localization {text}")
+                    warned = lost
+            if (now - renewed) / NS >= self.cfg.lease_s / 4:
+                rep: NavReply = self.call(keys.NAV_CMD, RenewRoute(rid, self.cfg.lease_s))
+                renewed = self.now()
+                if not rep.accepted:  # navigation restarted and forgot the route
+                    self.event("warning", f"{rid}: {rep.reason}; sending it again")
+                    sent = renewed = self._send(seg, rid)
+
+    def _cancel(self, rid: str) -> None:
+        with contextlib.suppress(RpcError):  # the lease stops the robot anyway
+            self.ctx.bus.call(keys.NAV_CMD, CancelRoute(route_id=rid), timeout=2.0)
+
+    # --- at a location ---
+    def settle(self) -> PoseEstimate | None:
+        """Wait until the robot has been localized throughout the last ``settle_s``
+        and its mean speed and turn rate over them are below the still thresholds
+        (the mean, not every sample: the estimate's turn rate carries the encoders'
+        noise). Returns the newest pose, or None after ``settle_timeout_s``."""
+        window: list[PoseEstimate] = []
+        t0 = self.now()
+        warned = False
+        while True:
+            t0 += self.wait(0.1)
+            now = self.now()
+            if (now - t0) / NS > self.cfg.settle_timeout_s:
+                return None
+            p = self.pose.get()
+            if p is None:
+                continue
+            if not p.localized:
+                if not warned:
+                    self.event("warning", "localization lost before a scan: waiting")
+                    warned = True
+                window.clear()
+                continue
+            window.append(p)
+            window = [q for q in window if (p.stamp_ns - q.stamp_ns) / NS <= self.cfg.settle_s]
+            if (p.stamp_ns - window[0].stamp_ns) / NS < 0.9 * self.cfg.settle_s:
+                continue
+            v = sum(q.v for q in window) / len(window)
+            w = sum(q.w for q in window) / len(window)
+            if abs(v) < self.cfg.still_speed and abs(w) < self.cfg.still_turn:
+                return p
+
+    def off_by(self, step: Step, x: float, y: float) -> float:
+        return math.hypot(x - step.x, y - step.y)
+
+    def position(self, step: Step, seg: Segment, tag: str, drive_first: bool) -> str:
+        """Bring the robot to ``step``'s location and hold it still there; "" when it
+        is, else why not."""
+        for attempt in range(self.cfg.position_retries + 1):
+            if drive_first or attempt > 0:
+                self.detail = f"to {tag}"
+                ok, why = self.drive(seg, f"{self.mission}.{step.scan_id}.{attempt}")
+                if not ok:
+                    return why
+            self.detail = tag
+            p = self.settle()
+            if p is None:
+                return f"not localized and still within {self.cfg.settle_timeout_s:.0f} s"
+            off = self.off_by(step, p.x, p.y)
+            if off <= self.cfg.arrival_tolerance_m:
+                return ""
+            self.event("warning", f"{tag}: {100 * off:.1f} cm from the planned location")
+            drive_first = True
+        return f"still {100 * off:.1f} cm off after {self.cfg.position_retries + 1} tries"
+
+    # --- scanning ---
+    def found_on_scanner(self, step: Step) -> bool:
+        """A step the mission left in ``scanning`` (it restarted): True, and recorded,
+        when the scanner finished that scan and the robot still stands where planned."""
+        t0 = self.now()
+        while (st := self.scanner.get()) is None:  # a restarted mission hears it soon
+            if (self.now() - t0) / NS > self.cfg.scanner_lost_s:
+                return False
+            t0 += self.wait(0.1)
+        if st.scan_id != step.scan_id or st.state != ScannerState.DONE:
+            return False
+        p = self.settle()
+        if p is None or self.off_by(step, p.x, p.y) > self.cfg.arrival_tolerance_m:
+            return False
+        self.event("info", f"scan {step.scan_id}: found done on the scanner after a restart")
+        self._record(step, st, [p])
+        return True
+
+    def scan(self, step: Step, prof: ScanProfile) -> str:
+        """One attempt at ``step``'s scan: "" when done and recorded, else why not."""
+        self.log.update(
+            step.idx, status="scanning", attempts=step.attempts + 1, started_ns=self.now()
+        )
+        with self._lock:
+            self._collect = []
+        try:
+            self.call(keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission))
+        except RpcError as exc:
+            return f"start failed: {exc}"
+        try:
+            return self._await_scan(step)
+        finally:
+            with self._lock:
+                self._collect = None
+
+    def _await_scan(self, step: Step) -> str:
+        t0 = seen = self.now()
+        while True:
+            paused = self.wait(0.2)
+            t0, seen = t0 + paused, seen + paused
+            now = self.now()
+            if (now - t0) / NS > self.cfg.scan_timeout_s:
+                self._stop_scan()
+                return f"no end in {self.cfg.scan_timeout_s:.0f} s"
+            st = self.scanner.get()
+            # a status from before this attempt (a retry follows an error for the
+            # same scan id) says nothing about it
+            if st is None or st.stamp_ns < t0 or st.scan_id != step.scan_id:
+                if (now - seen) / NS > self.cfg.scanner_lost_s:
+                    lost = self.cfg.scanner_lost_s
+                    return f"scanner lost the scan (no status for it in {lost:.0f} s)"
+                continue
+            seen = now
+            if st.state == ScannerState.ERROR:
+                self.wait(1.0)
+                return f"scanner error: {st.error}"
+            if st.state == ScannerState.DONE:
+                with self._lock:
+                    poses, self._collect = self._collect or [], None
+                return self._record(step, st, poses)
+
+    def _record(self, step: Step, st: ScannerStatus, poses: list[PoseEstimate]) -> str:
+        """Record the scan as done if the pose over it was where planned: its mean
+        within the arrival tolerance, its spread within half of it, localized for at
+        least half the scan (a standing robot's estimate rides out a short RTK float
+        on zero-velocity updates; the statistics use the localized poses only)."""
+        good = [p for p in poses if p.localized]
+        if 2 * len(good) < max(len(poses), 1):
+            return f"localized for only {len(good)} of {len(poses)} poses during the scan"
+        stats = pose_stats(good)
+        off = self.off_by(step, stats["mean_x"], stats["mean_y"])
+        moved = math.hypot(stats["sd_x"], stats["sd_y"])
+        tol = self.cfg.arrival_tolerance_m
+        if off > tol or moved > tol / 2:
+            return (
+                f"pose during the scan {100 * off:.1f} cm off the plan "
+                f"(SD {100 * moved:.1f} cm): not recorded as done"
+            )
+        self.log.update(
+            step.idx,
+            status="done",
+            file=st.file,
+            ended_ns=self.now(),
+            pitch=st.pitch,
+            roll=st.roll,
+            **stats,
+        )
+        return ""
+
+    def _stop_scan(self) -> None:
+        try:
+            self.ctx.bus.call(keys.SCANNER_CMD, StopScan(), timeout=self.cfg.rpc_timeout_s)
+        except RpcError as exc:
+            self.event("warning", f"scanner: stop failed: {exc}")

@@ -1,0 +1,152 @@
+"""A cut link between the robot and the base station: the mission's events of the
+gap reach the base station once the link is back (history topics, common.keys).
+
+The two machines are two Zenoh routers on loopback joined through a TCP relay in the
+test process, which the test cuts (closing every connection and refusing new ones,
+as a link whose far end is unreachable does) and restores.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import socket
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+
+from common import keys
+from common.config import zenoh_config
+from common.messages.mission import MissionEvent
+from common.transport import Bus
+from tests.conftest import free_port
+
+
+class Relay:
+    """A TCP relay from a local port to ``target`` that can be cut and restored."""
+
+    def __init__(self, target: int) -> None:
+        self.target = target
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port: int = self.server.getsockname()[1]
+        self.up = True
+        self._conns: list[socket.socket] = []
+        self._lock = threading.Lock()
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                a, _ = self.server.accept()
+            except OSError:
+                return
+            if not self.up:
+                a.close()
+                continue
+            try:
+                b = socket.create_connection(("127.0.0.1", self.target))
+            except OSError:
+                a.close()
+                continue
+            with self._lock:
+                self._conns += [a, b]
+            for src, dst in ((a, b), (b, a)):
+                threading.Thread(target=self._pump, args=(src, dst), daemon=True).start()
+
+    @staticmethod
+    def _pump(src: socket.socket, dst: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            while data := src.recv(65536):
+                dst.sendall(data)
+        for s in (src, dst):
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)
+
+    def cut(self) -> None:
+        self.up = False
+        with self._lock:
+            conns, self._conns = self._conns, []
+        for s in conns:
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)
+            s.close()
+
+    def restore(self) -> None:
+        self.up = True
+
+    def close(self) -> None:
+        self.cut()
+        self.server.close()
+
+
+@pytest.fixture
+def link() -> Iterator[tuple[Bus, Bus, Relay]]:
+    robot_ep = f"tcp/127.0.0.1:{free_port()}"
+    robot = zenoh.open(zenoh_config("router", [robot_ep], []))
+    relay = Relay(int(robot_ep.rsplit(":", 1)[1]))
+    base_ep = f"tcp/127.0.0.1:{free_port()}"
+    base = zenoh.open(zenoh_config("router", [base_ep], [f"tcp/127.0.0.1:{relay.port}"]))
+    # clients: each talks only through its own machine's router, so the relay is the
+    # one path between them (peers on one host would find each other directly)
+    mission = Bus(zenoh.open(zenoh_config("client", [], [robot_ep])), "mission")
+    viz = Bus(zenoh.open(zenoh_config("client", [], [base_ep])), "viz")
+    yield mission, viz, relay
+    for bus in (viz, mission):
+        bus.close()
+        bus.session.close()
+    relay.close()
+    base.close()
+    robot.close()
+
+
+def test_events_of_a_partition_reach_the_base_station_when_it_heals(
+    link: tuple[Bus, Bus, Relay],
+) -> None:
+    mission, viz, relay = link
+    got: list[str] = []
+    cond = threading.Condition()
+
+    def on_event(e: MissionEvent) -> None:
+        with cond:
+            got.append(e.text)
+            cond.notify_all()
+
+    def wait_for(texts: list[str], timeout: float) -> bool:
+        with cond:
+            return cond.wait_for(lambda: all(t in got for t in texts), timeout)
+
+    # the same stream without history, as a control: its gap is lost
+    plain_topic = dataclasses.replace(
+        keys.MISSION_EVENT, key=f"{keys.PREFIX}/test/plain", history=0
+    )
+    plain_got: list[str] = []
+    viz.subscribe(plain_topic, lambda e: plain_got.append(e.text))
+    plain = mission.publisher(plain_topic)
+    pub = mission.publisher(keys.MISSION_EVENT)
+    pub.put(MissionEvent(mission="m", level="info", text="before 0"))
+    viz.subscribe(keys.MISSION_EVENT, on_event)
+    # a late subscriber gets the history; then the live stream
+    assert wait_for(["before 0"], timeout=10), got
+    pub.put(MissionEvent(mission="m", level="info", text="before 1"))
+    assert wait_for(["before 1"], timeout=5), got
+
+    relay.cut()
+    gap = [f"gap {k}" for k in range(20)]
+    for text in gap:
+        pub.put(MissionEvent(mission="m", level="warning", text=text))
+        plain.put(MissionEvent(mission="m", level="warning", text=text))
+    with cond:  # nothing crosses a cut link
+        assert not cond.wait_for(lambda: "gap 0" in got, timeout=2.0), got
+    relay.restore()
+    t0 = time.monotonic()
+    assert wait_for(gap, timeout=10), f"missing after the link came back: {got}"
+    healed = time.monotonic() - t0
+    assert healed <= 2.0, f"the gap's events arrived {healed:.1f} s after the link's return"
+    assert len(got) == len(set(got)), f"an event came twice: {got}"
+    pub.put(MissionEvent(mission="m", level="info", text="after"))
+    plain.put(MissionEvent(mission="m", level="info", text="after"))
+    assert wait_for(["after"], timeout=5)
+    assert not any(t.startswith("gap") for t in plain_got), "the control kept its gap"
