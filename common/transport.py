@@ -25,7 +25,7 @@ import numpy as np
 import zenoh
 import zenoh.ext
 
-from common.keys import Rpc, Topic
+from common.keys import ALIVE_ALL, Rpc, Topic
 
 M = TypeVar("M")
 Q = TypeVar("Q")
@@ -298,6 +298,22 @@ class Bus:
             err = reply.err
             raise RpcError(err.payload.to_bytes().decode(errors="replace") if err else "error")
         raise RpcTimeout(f"no reply on {rpc.key} within {timeout:g} s")
+
+    def watch_alive(self, callback: Callable[[str, bool], object]) -> None:
+        """Call ``callback(token_key, alive)`` for every service's liveliness token
+        (``alive/...``), those declared before this call included: alive False when a
+        token goes, which is within milliseconds of its process dying (the kernel
+        closes its connection), long before any heartbeat or lease would tell."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            except Exception:
+                self._failed(ALIVE_ALL, "liveliness callback")
+
+        self._handles.append(
+            self.session.liveliness().declare_subscriber(ALIVE_ALL, on_sample, history=True)
+        )
 
     def put_raw(self, key: str, data: bytes) -> None:
         """Publish raw bytes on a key outside the message table (a ROS 2 bridge's CDR

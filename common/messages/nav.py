@@ -82,6 +82,10 @@ class RenewRoute(msgspec.Struct, frozen=True, tag=True):
 
 NavCommand = FollowRoute | CancelRoute | RenewRoute
 
+#: how ``NavProgress.detail`` begins when a route stopped for want of its supervisor
+#: (no renewal, or its liveliness token went): the supervisor, if alive, sends it again
+LEASE_ENDED = "lease ended"
+
 
 class NavReply(Message, frozen=True, kw_only=True):
     accepted: bool

@@ -57,7 +57,6 @@ class MissionService:
         self.phase = MissionPhase.IDLE
         self.detail = ""
         self.current = 0
-        self.distance = 0.0
         self._paused = threading.Event()
         self._abort = threading.Event()
         self._wake = threading.Event()  # abort or stop: ends every wait at once
@@ -88,7 +87,7 @@ class MissionService:
             scans_failed=failed,
             scans_total=total,
             current_scan=self.current,
-            distance_m=self.distance,
+            distance_m=self.survey.distance if self.survey else 0.0,
             detail=self.survey.detail if self.survey and self.active else self.detail,
         )
 

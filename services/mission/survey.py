@@ -23,6 +23,7 @@ from common import clock as clk
 from common import keys
 from common.keys import Rpc
 from common.messages.nav import (
+    LEASE_ENDED,
     CancelRoute,
     FollowRoute,
     NavProgress,
@@ -43,7 +44,6 @@ Q = TypeVar("Q")
 R = TypeVar("R")
 NS = 1_000_000_000
 SKEW_NS = NS // 5
-LEASE = "lease"  # how navigation's detail of an expired route begins
 
 
 class Aborted(Exception):
@@ -74,6 +74,8 @@ class Survey:
         self.scanner: Latest[ScannerStatus] = bus.latest(keys.SCANNER_STATUS)
         self._lock = threading.Lock()
         self._collect: list[PoseEstimate] | None = None
+        self._last_pose: PoseEstimate | None = None
+        self.distance = 0.0  # metres driven since this survey (or its resumption) began
         bus.subscribe(keys.NAV_POSE, self._on_pose)
         self.detail = ""
         self._routes = 0
@@ -82,6 +84,12 @@ class Survey:
         with self._lock:
             if self._collect is not None:
                 self._collect.append(p)
+            # distance driven, measured: the estimate's speed (odometry-borne, zero
+            # at rest through the zero-velocity updates) over time, not the plan's legs
+            if self._last_pose is not None and p.stamp_ns > self._last_pose.stamp_ns:
+                dt = min((p.stamp_ns - self._last_pose.stamp_ns) / NS, 1.0)
+                self.distance += abs(p.v) * dt
+            self._last_pose = p
 
     def now(self) -> int:
         return self.ctx.clock.now_ns()
@@ -159,7 +167,7 @@ class Survey:
                     return True, ""
                 if p.state == NavState.BLOCKED:
                     return False, "navigation blocked"
-                if p.state == NavState.FAILED and not p.detail.startswith(LEASE):
+                if p.state == NavState.FAILED and not p.detail.startswith(LEASE_ENDED):
                     return False, f"navigation failed: {p.detail}"
                 if p.state == NavState.FAILED:  # held up past the lease (paused, say)
                     self.event("warning", f"{rid}: lease ran out, sending the route again")

@@ -21,7 +21,7 @@ from typing import Annotated
 import msgspec
 
 from common.geo import wrap_angle
-from common.messages.nav import Leg, NavState
+from common.messages.nav import LEASE_ENDED, Leg, NavState
 from services.nav.pursuit import (
     along_remaining,
     cross_track,
@@ -165,6 +165,11 @@ class Follower:
             self.lease_until = max(self.lease_until, lease_until)
         return True
 
+    def abandon(self, why: str) -> None:
+        """Stop the route now, as an expired lease does: its supervisor is gone."""
+        if self.active:
+            self.state, self.end_detail = NavState.FAILED, why
+
     def cancel(self) -> None:
         if self.state not in (NavState.IDLE, NavState.ARRIVED, NavState.BLOCKED):
             self.state = NavState.CANCELLED
@@ -216,7 +221,7 @@ class Follower:
             return Command(v, w, state, self.leg, togo, xte, herr, event, why)
 
         if t > self.lease_until:
-            return out(0.0, 0.0, NavState.FAILED, "failed", "lease expired: no supervisor")
+            return out(0.0, 0.0, NavState.FAILED, "failed", f"{LEASE_ENDED}: not renewed")
         if not localized:
             return out(0.0, 0.0, NavState.NOT_LOCALIZED)
         if self._join:

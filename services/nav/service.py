@@ -14,6 +14,7 @@ from common.field_geojson import load_frame
 from common.messages.base import LaserScan, Odometry, Twist
 from common.messages.gnss import GnssHeading, NavSatFix
 from common.messages.nav import (
+    LEASE_ENDED,
     CancelRoute,
     FollowRoute,
     NavCommand,
@@ -24,6 +25,7 @@ from common.messages.nav import (
     RenewRoute,
 )
 from common.service import Context
+from common.status import parse_token
 from services.nav.config import NavConfig
 from services.nav.ekf import Localizer
 from services.nav.follower import Follower
@@ -51,6 +53,8 @@ class NavService:
         bus.subscribe(keys.GNSS_HEADING, self._on_heading)
         bus.subscribe(keys.BASE_SCAN, self._on_scan)
         bus.serve(keys.NAV_CMD, self.handle)
+        self._missions: set[str] = set()  # liveliness tokens of mission supervisors
+        bus.watch_alive(self._on_alive)
         c = self.loc.counters
         bus.report("ekf_rejected", lambda: c.rejected)
         bus.report("ekf_resets", lambda: c.resets)
@@ -145,6 +149,22 @@ class NavService:
                     self.follower.cancel()
                     self.ctx.log.info("route %s cancelled", self.follower.route_id)
         return NavReply(stamp_ns=now, accepted=True)
+
+    def _on_alive(self, token: str, alive: bool) -> None:
+        """A mission that dies stops the robot at once rather than at its lease's end
+        (its token goes as its connection closes); the lease covers a hung or cut-off
+        one. Routes sent by others (experiments, tests) are left to their leases."""
+        a = parse_token(token)
+        if a is None or a.service != "mission":
+            return
+        with self._lock:
+            if alive:
+                self._missions.add(token)
+            elif token in self._missions:
+                self._missions.discard(token)
+                if not self._missions and self.follower.active:
+                    self.follower.abandon(f"{LEASE_ENDED}: the mission is gone ({a.machine})")
+                    self.ctx.log.warning("mission gone: route %s stopped", self.follower.route_id)
 
     def _localized(self, t: float) -> bool:
         """Localized: the filter's uncertainty is within bounds *and* a fix was fused

@@ -65,7 +65,12 @@ def snapshot_path(run_dir: Path) -> Path:
 
 def deployment_id() -> str:
     """The parent process (pid and start time, so a reused pid differs): the same for
-    a simulator and its restarts by one launcher, different for the next launcher."""
+    a simulator and its restarts by one launcher, different for the next launcher.
+    ``PHENOROVER_SIM_DEPLOYMENT`` names the deployment instead: a simulated power cut
+    kills the launcher too, and the world (which has no power to lose) must go on."""
+    named = os.environ.get("PHENOROVER_SIM_DEPLOYMENT")
+    if named:
+        return named
     ppid = os.getppid()
     try:
         with open(f"/proc/{ppid}/stat", "rb") as f:

@@ -15,7 +15,7 @@ from typing import TypeVar
 from common import keys
 from common.cli import wait_alive
 from common.keys import Topic
-from common.messages.nav import FollowRoute, Leg, NavState
+from common.messages.nav import LEASE_ENDED, FollowRoute, Leg, NavState
 from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
 from tests.conftest import Procs
@@ -146,7 +146,7 @@ def test_a_route_not_renewed_stops_the_robot(
     failed = progress.wait_for(
         lambda p: p.route_id == "leased" and p.state == NavState.FAILED, timeout=60
     )
-    assert failed is not None and failed.detail.startswith("lease expired"), failed
+    assert failed is not None and failed.detail.startswith(LEASE_ENDED), failed
     # the robot turns to the leg (about 5 s) and drives off before the lease ends
     assert max(abs(t.v) for t in truth) > 0.2, "the robot never drove"
     assert truth.wait_for(lambda t: t.stamp_ns > failed.stamp_ns and abs(t.v) < STILL, timeout=20)
