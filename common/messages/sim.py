@@ -10,6 +10,7 @@ import msgspec
 from common.messages.core import (
     Angle,
     Coordinate,
+    Finite,
     Message,
     NonNegative,
     Velocity,
@@ -45,10 +46,22 @@ class TruthPose(Message, frozen=True, kw_only=True):
 
 class SimAntennas(Message, frozen=True, kw_only=True):
     """True phase-centre positions of both GNSS antennas in the ``field`` frame
-    (metres): what the simulated receivers measure, before their error model."""
+    (metres): what the simulated receivers measure, before their error model.
+
+    The fields after ``p2`` are injected faults (simulation only, scheduled in the
+    simulator's config, see ``services/sim/faults.py``), per antenna 1 and 2:
+    ``outage*``: the receiver sends nothing; ``force_float*``: it reports RTK float
+    with float noise; ``offset*``: (east, north) metres added to what it reports,
+    its fix quality unchanged (multipath). The positions stay the truth."""
 
     p1: tuple[Coordinate, Coordinate, Coordinate]
     p2: tuple[Coordinate, Coordinate, Coordinate]
+    outage1: bool = False
+    outage2: bool = False
+    force_float1: bool = False
+    force_float2: bool = False
+    offset1: tuple[Finite, Finite] = (0.0, 0.0)
+    offset2: tuple[Finite, Finite] = (0.0, 0.0)
 
 
 class SimWheelCommand(Message, frozen=True, kw_only=True):

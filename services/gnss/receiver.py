@@ -14,6 +14,7 @@ import socket
 import threading
 from typing import Protocol
 
+import msgspec
 import numpy as np
 
 from common import keys
@@ -22,9 +23,9 @@ from common.geo import FieldFrame
 from common.messages.sim import SimAntennas
 from common.transport import Bus
 from services.gnss.config import AntennaConfig, GnssConfig
-from services.gnss.nmea import Gga, Gst
+from services.gnss.nmea import FixQuality, Gga, Gst
 from services.gnss.nmea_format import format_gga, format_gst
-from services.gnss.rtk_model import RtkErrorModel, RtkSample
+from services.gnss.rtk_model import STATES, RtkErrorModel, RtkSample
 
 log = logging.getLogger(__name__)
 
@@ -150,22 +151,51 @@ def receiver_output(
 
 class SimReceiver:
     """A simulated Reach M2: antenna truth from the simulator, errors from the RTK
-    model, out as GST + GGA sentences at the simulator's antenna rate (10 Hz)."""
+    model, out as GST + GGA sentences at the simulator's antenna rate (10 Hz).
+
+    It honours the faults the simulator injects (fields of :class:`SimAntennas`):
+    an outage sends nothing; a forced float reports RTK float (quality 5) with the
+    float noise of a second RTK model locked in FLOAT; a multipath offset is added
+    to the reported position with the quality unchanged. Both models step every
+    epoch whatever the faults, on their own generators, so the receiver's noise
+    outside a fault is the same with or without it."""
 
     def __init__(self, cfg: GnssConfig, antenna: AntennaConfig, bus: Bus, frame: FieldFrame):
         self.antenna = antenna.id
         self._frame = frame
         self._model = RtkErrorModel(cfg.rtk, np.random.default_rng([cfg.seed, antenna.id]))
+        no_jumps = [[0.0] * len(STATES) for _ in STATES]
+        locked = msgspec.structs.replace(
+            cfg.rtk, initial_state=FixQuality.FLOAT, rates_per_s=no_jumps
+        )
+        self._float = RtkErrorModel(locked, np.random.default_rng([cfg.seed, antenna.id, 5]))
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=100)
         self._last_ns: int | None = None
         bus.subscribe(keys.SIM_ANTENNAS, self._on_truth)
 
-    def _on_truth(self, msg: SimAntennas) -> None:
+    def epoch(self, msg: SimAntennas) -> str:
+        """The sentences for one simulator epoch (``""`` during an outage). Steps the
+        error models by the time since the previous epoch (sim time)."""
         dt = 0.1 if self._last_ns is None else max(1e-3, (msg.stamp_ns - self._last_ns) / NS)
         self._last_ns = msg.stamp_ns
         sample = self._model.step(dt)
-        p = msg.p1 if self.antenna == 1 else msg.p2
-        self._push(receiver_output(self._frame, p, sample, (msg.stamp_ns / NS) % 86400.0))
+        floating = self._float.step(dt)
+        one = self.antenna == 1
+        if msg.outage1 if one else msg.outage2:
+            return ""
+        if msg.force_float1 if one else msg.force_float2:
+            sample = floating
+        east, north = msg.offset1 if one else msg.offset2
+        if sample.error_enu_m is not None and (east or north):
+            e, n, u = sample.error_enu_m
+            sample = msgspec.structs.replace(sample, error_enu_m=(e + east, n + north, u))
+        p = msg.p1 if one else msg.p2
+        return receiver_output(self._frame, p, sample, (msg.stamp_ns / NS) % 86400.0)
+
+    def _on_truth(self, msg: SimAntennas) -> None:
+        text = self.epoch(msg)
+        if text:
+            self._push(text)
 
     def _push(self, text: str) -> None:
         # nobody reading: drop, as a serial port would overrun

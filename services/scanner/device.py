@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import can
@@ -39,6 +40,39 @@ class CanDevice:
         self.bus.shutdown()
 
 
+class BusOffGate(can.BusABC):
+    """The client's end of a bus whose scanner node may go bus-off (the emulator's
+    ``bus_off`` fault): while ``off()`` holds, :meth:`send` raises
+    ``can.CanOperationError`` (as python-can's socketcan does when a frame finds no
+    node to acknowledge it and the transmit queue fills: ENOBUFS) and ``state`` is
+    ``BusState.ERROR``; otherwise it passes through to ``inner``, which it owns."""
+
+    def __init__(self, inner: can.BusABC, off: Callable[[], bool]) -> None:
+        super().__init__(channel=inner.channel_info)
+        self.channel_info = f"{inner.channel_info} (bus-off fault gate)"
+        self._inner, self._off = inner, off
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._off():
+            raise can.CanOperationError("Failed to transmit: bus-off (simulated fault)")
+        self._inner.send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return self._inner.recv(timeout), False
+
+    @property
+    def state(self) -> can.BusState:
+        return can.BusState.ERROR if self._off() else self._inner.state
+
+    @state.setter
+    def state(self, new_state: can.BusState) -> None:
+        self._inner.state = new_state
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._inner.shutdown()
+
+
 class SimDevice:
     """The emulated FARO on a virtual bus private to this process."""
 
@@ -46,7 +80,7 @@ class SimDevice:
 
     def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
         channel = f"faro-sim-{os.getpid()}"
-        self.bus: can.BusABC = can.Bus(interface="virtual", channel=channel)
+        client_bus = can.Bus(interface="virtual", channel=channel)
         self._device_bus = can.Bus(interface="virtual", channel=channel)
         self._ctx, self._cfg = ctx, cfg
         self._inclination = (0.0, 0.0)
@@ -64,6 +98,7 @@ class SimDevice:
             on_scan_complete=self._store,
             inclination_deg=lambda: self._inclination,
         )
+        self.bus: can.BusABC = BusOffGate(client_bus, self.emulator.bus_off)
         self.emulator.start()
 
     def _store(self, scan_id: int, profile: ScanProfile) -> None:

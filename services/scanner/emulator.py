@@ -54,7 +54,8 @@ STORAGE_ERROR_CODE = 90
 
 
 class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Faults to inject.
+    """Faults to inject (the scanner's ``[services.scanner.sim_faults]``). Times are on
+    the emulator's clock (sim seconds in simulation).
 
     - ``lose_first_acks``: the first N commands are executed but their ACK is lost;
     - ``lose_first_commands``: the first N commands never reach the device;
@@ -62,7 +63,17 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
       frames still flow;
     - ``error_code`` > 0: the scan fails with that code when it reaches
       ``error_at_pct``;
-    - ``stuck_at_pct``: progress freezes there and the scan never completes.
+    - ``stuck_at_pct``: progress freezes there and the scan never completes;
+    - ``bus_off_for_s`` > 0: the scanner's CAN node goes bus-off right after it
+      acknowledges the Initiate of a scan, for that long: it sends and hears nothing
+      (the scan itself goes on), and the client's sends fail with
+      ``can.CanOperationError``, as python-can reports a bus with no one to
+      acknowledge (see :class:`services.scanner.device.BusOffGate`); once only.
+
+    Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;
+    for ``bus_off`` the first listed scan to start). A command concerns the scan it
+    names (Initiate, End) or the current one (Record/Pause). With ``lose_scan_ids``
+    the first N commands or ACKs *of each listed scan* are lost.
     """
 
     lose_first_acks: Annotated[int, msgspec.Meta(ge=0)] = 0
@@ -71,8 +82,16 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     error_code: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 0
     error_at_pct: NonNegative = 50.0
     stuck_at_pct: NonNegative | None = None
-    # with error_code > 0: fail only these scan ids (empty: every scan)
     error_scan_ids: list[int] = msgspec.field(default_factory=list)
+    stuck_scan_ids: list[int] = msgspec.field(default_factory=list)
+    lose_scan_ids: list[int] = msgspec.field(default_factory=list)
+    no_ack_scan_ids: list[int] = msgspec.field(default_factory=list)
+    bus_off_for_s: NonNegative = 0.0
+    bus_off_scan_ids: list[int] = msgspec.field(default_factory=list)
+
+
+def _aimed(ids: list[int], scan_id: int) -> bool:
+    return not ids or scan_id in ids
 
 
 def default_scan_duration_s(profile: ScanProfile) -> float:
@@ -119,8 +138,11 @@ class FaroEmulator:
         self._ids = {k: self._codec.frame_id(k) for k in (InitiateScan, RecordPause, EndScan)}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._lost_commands = 0
-        self._lost_acks = 0
+        # faults: commands and ACKs lost so far, per scan id (None: not aimed at scans)
+        self._lost_commands: dict[int | None, int] = {}
+        self._lost_acks: dict[int | None, int] = {}
+        self._bus_off_used, self._bus_off_until = False, -float("inf")
+        self._was_off = False
         # Scan state; only the emulator thread touches it once started.
         self.state = ScanState.IDLE
         self.scan_id = 0
@@ -172,6 +194,10 @@ class FaroEmulator:
         msg = self._bus.recv(timeout_s)
         if msg is not None:
             self._receive(msg)
+        off = self.bus_off()
+        if self._was_off and not off:
+            log.warning("FARO emulator: bus-off over (fault)")
+        self._was_off = off
         self._advance()
         if self._now() - self._last_status_t >= self._status_period:
             self._send_status()
@@ -179,24 +205,48 @@ class FaroEmulator:
     def _receive(self, msg: can.Message) -> None:
         if msg.arbitration_id not in self._ids.values() or msg.is_extended_id:
             return  # not addressed to the scanner (or our own replies on a loopback bus)
+        if self.bus_off():
+            return  # a bus-off node hears nothing
         try:
             frame = self._codec.decode(msg)
         except CanDecodeError as e:
             log.warning("FARO emulator ignores a bad command: %s", e)
             return
-        if self.faults.no_ack:
+        f = self.faults
+        sid = frame.scan_id if isinstance(frame, InitiateScan | EndScan) else self.scan_id
+        if f.no_ack and _aimed(f.no_ack_scan_ids, sid):
             return
-        if self._lost_commands < self.faults.lose_first_commands:
-            self._lost_commands += 1
+        if self._lose(self._lost_commands, f.lose_first_commands, sid):
             log.info("FARO emulator: command lost (fault): %r", frame)
             return
         result = self._execute(frame)
-        if self._lost_acks < self.faults.lose_first_acks:
-            self._lost_acks += 1
+        if self._lose(self._lost_acks, f.lose_first_acks, sid):
             log.info("FARO emulator: ACK lost (fault) for %r", frame)
         else:
             self._send(Ack(command_id=msg.arbitration_id, result=result))
         self._send_status()
+        if isinstance(frame, InitiateScan) and result == AckResult.OK:
+            self._maybe_bus_off(sid)
+
+    def _lose(self, counts: dict[int | None, int], first: int, sid: int) -> bool:
+        """One more loss of the first ``first`` (per scan with ``lose_scan_ids``)?"""
+        ids = self.faults.lose_scan_ids
+        key = sid if ids else None
+        if not _aimed(ids, sid) or counts.get(key, 0) >= first:
+            return False
+        counts[key] = counts.get(key, 0) + 1
+        return True
+
+    def _maybe_bus_off(self, sid: int) -> None:
+        f = self.faults
+        if f.bus_off_for_s > 0 and not self._bus_off_used and _aimed(f.bus_off_scan_ids, sid):
+            self._bus_off_used = True
+            self._bus_off_until = self._now() + f.bus_off_for_s
+            log.warning("FARO emulator: bus-off (fault) for %g s at scan %d", f.bus_off_for_s, sid)
+
+    def bus_off(self) -> bool:
+        """Is the scanner's CAN node bus-off (the ``bus_off`` fault) now? Any thread."""
+        return self._now() < self._bus_off_until
 
     def _execute(self, frame: Frame) -> AckResult:
         now = self._now()
@@ -230,9 +280,9 @@ class FaroEmulator:
         active = self._active_s + self._now() - self._segment_t0
         progress = min(100.0, 100.0 * active / self._scan_s)
         f = self.faults
-        if f.stuck_at_pct is not None:
+        if f.stuck_at_pct is not None and _aimed(f.stuck_scan_ids, self.scan_id):
             progress = min(progress, f.stuck_at_pct, 99.0)
-        failing = f.error_code and (not f.error_scan_ids or self.scan_id in f.error_scan_ids)
+        failing = f.error_code and _aimed(f.error_scan_ids, self.scan_id)
         if failing and progress >= f.error_at_pct:
             self._progress = f.error_at_pct
             self.state, self.error_code, self._segment_t0 = ScanState.ERROR, f.error_code, None
@@ -273,6 +323,8 @@ class FaroEmulator:
         )
 
     def _send(self, frame: Frame) -> None:
+        if self.bus_off():
+            return  # what a bus-off node transmits is lost
         try:
             self._bus.send(self._codec.encode(frame))
         except can.CanError as e:

@@ -7,6 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError, load_manifest
+from services.sim.faults import Fault
 from services.sim.render import ScanSettings
 from services.sim.world import WorldConfig
 
@@ -31,6 +32,9 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``scan_dir``: the only folder rendered scans may be written under (the scanner's
     card); empty: the manifest's ``[services.scanner] storage_dir`` when the manifest
     has one, else the run folder.
+    ``faults``: device faults scheduled in sim time, ``[[services.sim.faults]]`` entries
+    (see :mod:`services.sim.faults` and docs/faults.md); simulation only, the truth
+    is never touched.
     """
 
     real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 1.0
@@ -47,6 +51,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     resume: bool = True
     snapshot_s: Annotated[float, msgspec.Meta(ge=0, le=3600)] = 0.5
     scan_dir: str = ""
+    faults: list[Fault] = msgspec.field(default_factory=list)
 
 
 class SimCli:

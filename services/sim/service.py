@@ -37,6 +37,7 @@ from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
 from services.sim.config import SimConfig
+from services.sim.faults import FaultSchedule, describe
 from services.sim.lidar import beam_angles
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
@@ -56,6 +57,7 @@ class SimService:
         self.state = self.world.settle(RobotState(x=x, y=y, yaw=math.radians(yaw)))
         self.rng = np.random.default_rng(cfg.seed)
         self.sim_ns = 0
+        self.faults = FaultSchedule(cfg.faults)
         self.snap_path = snapshot.snapshot_path(ctx.run_dir)
         self.world_id = snapshot.fingerprint(layout, fld, cfg.world)
         if cfg.resume:
@@ -171,13 +173,32 @@ class SimService:
 
     def _publish(self, k: int) -> None:
         s, t = self.state, self.sim_ns
+        for fault, started in self.faults.changes(t / NS):
+            self.ctx.log.warning("%s", describe(fault, started))
+        fx = self.faults.effects(t / NS)
+        # faults change what the devices report only: the same random numbers are
+        # drawn either way, so the true motion does not depend on them
         ev, ew = self.world.encoder_twist(s, self.rng)
-        self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id="base_link", v=ev, w=ew))
+        if fx.encoders == "zero":
+            ev = ew = 0.0
+        if fx.encoders != "silent":
+            self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id="base_link", v=ev, w=ew))
         if self._every(self.cfg.gnss_hz, k):
             a = self.world.gnss_truth(s).astype(float)
-            p1 = (float(a[0, 0]), float(a[0, 1]), float(a[0, 2]))
-            p2 = (float(a[1, 0]), float(a[1, 1]), float(a[1, 2]))
-            self.ant_pub.put(SimAntennas(stamp_ns=t, frame_id="field", p1=p1, p2=p2))
+            self.ant_pub.put(
+                SimAntennas(
+                    stamp_ns=t,
+                    frame_id="field",
+                    p1=(float(a[0, 0]), float(a[0, 1]), float(a[0, 2])),
+                    p2=(float(a[1, 0]), float(a[1, 1]), float(a[1, 2])),
+                    outage1=fx.outage[0],
+                    outage2=fx.outage[1],
+                    force_float1=fx.force_float[0],
+                    force_float2=fx.force_float[1],
+                    offset1=fx.offset[0],
+                    offset2=fx.offset[1],
+                )
+            )
         if self._every(self.cfg.truth_hz, k):
             self.truth_pub.put(
                 TruthPose(
@@ -194,7 +215,7 @@ class SimService:
                 )
             )
         if self._every(self.cfg.lidar_hz, k):
-            ranges = self.world.lidar_scan(s, self.rng)
+            ranges = self.world.lidar_scan(s, self.rng, fx.obstacles)
             lo, hi, inc = self._lidar_meta
             lc = self.cfg.world.lidar
             self.lidar_pub.put(

@@ -6,7 +6,9 @@ radians) and is the ground truth the evaluation scores against.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from typing import Annotated
 
 import msgspec
@@ -177,9 +179,25 @@ class World:
         """A FARO scan from the scanner pose ``pose`` (4x4, field <- scanner)."""
         return render(self.scene, pose, settings, rng, self.cfg.scanner_noise)
 
-    def lidar_scan(self, state: RobotState, rng: np.random.Generator) -> npt.NDArray[np.float32]:
-        """A Hokuyo sweep from the robot at ``state`` (float32 m, inf = no return)."""
-        return lidar_mod.scan(self.lidar_scene, state, self.cfg.lidar, rng)
+    def lidar_scan(
+        self,
+        state: RobotState,
+        rng: np.random.Generator,
+        transient: Sequence[Obstacle] = (),
+    ) -> npt.NDArray[np.float32]:
+        """A Hokuyo sweep from the robot at ``state`` (float32 m, inf = no return).
+        ``transient``: obstacles standing there just now besides the world's own (an
+        injected fault, see :mod:`services.sim.faults`); the same random numbers are
+        drawn with or without them."""
+        scene = self.lidar_scene
+        if transient:
+            boxes, cyls = _obstacle_arrays(list(transient), self.terrain)
+            scene = dataclasses.replace(
+                scene,
+                boxes=np.vstack([scene.boxes, boxes]),
+                cylinders=np.vstack([scene.cylinders, cyls]),
+            )
+        return lidar_mod.scan(scene, state, self.cfg.lidar, rng)
 
     def truth_points(self, spacing: float = 0.05) -> tuple[F64, U8]:
         """A dense, deterministic sample of every surface (field frame, m) with labels:

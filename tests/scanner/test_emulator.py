@@ -18,6 +18,7 @@ import pytest
 
 from services.scanner.can_codec import ScanProfile, ScanState
 from services.scanner.client import AckTimeout, CommandRejected, ScannerClient, ScannerStatus
+from services.scanner.device import BusOffGate
 from services.scanner.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 PROFILE = ScanProfile(resolution_index=4, quality=2)
@@ -91,7 +92,11 @@ class Rig:
             on_scan_complete=self._on_complete,
             inclination_deg=lambda: (1.234, -0.5),
         )
-        client_bus = self._bus()
+        # the client's end as the sim device wires it: sends fail while bus-off
+        client_bus = BusOffGate(
+            can.Bus(interface="virtual", channel=self.channel), emulator.bus_off
+        )
+        self.buses.append(client_bus)
         emulator.start()
         self.emulators.append(emulator)
         # Generous watchdogs by default: a loaded CI machine must not trip them.
@@ -277,3 +282,90 @@ def test_leak_check_catches_an_open_bus_and_a_thread() -> None:
 def test_default_scan_time_is_plausible() -> None:
     # 1/4 resolution at 4x: the commonly quoted ~7.5 minutes.
     assert default_scan_duration_s(ScanProfile(resolution_index=2, quality=4)) == 450.0
+
+
+def test_faults_aimed_at_scan_ids_spare_the_others(rig: Rig) -> None:
+    client = rig.start(
+        FaroFaults(stuck_at_pct=40.0, stuck_scan_ids=[2], no_ack=True, no_ack_scan_ids=[3]),
+        stuck_timeout_s=0.2,
+    )
+    assert client.start_scan(PROFILE, scan_id=1) == 1
+    assert client.wait_finished(2.0).state == ScanState.DONE
+    client.start_scan(PROFILE, scan_id=2)
+    st = client.wait_finished(3.0)
+    assert st.state == ScanState.ERROR and "stuck at 40%" in st.error
+    client.stop()
+    with pytest.raises(AckTimeout):
+        client.start_scan(PROFILE, scan_id=3)
+    assert client.start_scan(PROFILE, scan_id=4) == 4
+    assert client.wait_finished(2.0).state == ScanState.DONE
+    assert [sid for sid, _ in rig.completed] == [1, 4]
+
+
+def test_lost_acks_counted_per_aimed_scan(rig: Rig) -> None:
+    # three ACKs lost per aimed scan: more than one command's 1 + 2 attempts
+    client = rig.start(FaroFaults(lose_first_acks=3, lose_scan_ids=[2, 3]))
+    client.start_scan(PROFILE, scan_id=1)
+    assert client.wait_finished(2.0).state == ScanState.DONE
+    with pytest.raises(AckTimeout):
+        client.start_scan(PROFILE, scan_id=2)
+    # the device did start it; the fourth Initiate of scan 2 is acknowledged
+    assert client.start_scan(PROFILE, scan_id=2) == 2
+    assert client.wait_finished(2.0).state == ScanState.DONE
+    with pytest.raises(AckTimeout):
+        client.start_scan(PROFILE, scan_id=3)  # scan 3 has its own three
+
+
+def test_bus_off_silences_the_device_and_fails_sends_then_recovers(rig: Rig) -> None:
+    clock = FakeClock()
+    client = rig.start(
+        FaroFaults(bus_off_for_s=5.0, bus_off_scan_ids=[2]),
+        now=clock,
+        scan_s=10.0,
+        stuck_timeout_s=100.0,
+        status_timeout_s=100.0,
+    )
+    gate = rig.buses[-1]
+    client.start_scan(PROFILE, scan_id=1)
+    clock.set(10.0)
+    assert until(client, lambda s: s.state != ScanState.SCANNING).state == ScanState.DONE
+    client.start_scan(PROFILE, scan_id=2)  # acknowledged, then the bus goes off
+    assert rig.emulators[0].bus_off() and gate.state == can.BusState.ERROR
+    clock.set(13.0)
+    st = client.poll(0.2)  # the device scans on but sends nothing
+    assert st.state == ScanState.SCANNING and st.progress_pct < 30
+    with pytest.raises(can.CanOperationError, match="bus-off"):
+        gate.send(can.Message(arbitration_id=0x100))
+    with pytest.raises(AckTimeout):
+        client.pause()
+    clock.set(16.0)  # 5 s later the node is back
+    assert until(client, lambda s: s.progress_pct == 60).state == ScanState.SCANNING
+    assert gate.state == can.BusState.ACTIVE
+    clock.set(20.0)
+    st = until(client, lambda s: s.state != ScanState.SCANNING)
+    assert st.state == ScanState.DONE and st.inclinometer is not None
+    clock.set(21.0)
+    client.start_scan(PROFILE, scan_id=3)  # once only
+    assert not rig.emulators[0].bus_off()
+
+
+def test_a_long_bus_off_fails_the_scan_and_the_client_recovers(rig: Rig) -> None:
+    clock = FakeClock()
+    client = rig.start(
+        FaroFaults(bus_off_for_s=5.0),
+        now=clock,
+        scan_s=10.0,
+        stuck_timeout_s=100.0,
+        status_timeout_s=2.0,
+    )
+    client.start_scan(PROFILE)
+    client.poll(0.05)  # the status sent with the ACK, before the bus went off
+    clock.set(3.0)
+    st = until(client, lambda s: s.state == ScanState.ERROR)
+    assert "no status from scanner" in st.error
+    clock.set(5.0)
+    client.stop()  # the device still runs the scan: end it, then start afresh
+    clock.set(6.0)
+    client.start_scan(PROFILE)
+    clock.set(16.0)
+    assert until(client, lambda s: s.state != ScanState.SCANNING).state == ScanState.DONE
