@@ -7,19 +7,23 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import pytest
 import zenoh
 from hypothesis import settings
 
 from common.config import zenoh_config
+from common.keys import Topic
 from common.launcher import free_loopback_port
 from common.transport import Bus
 
 REPO = Path(__file__).resolve().parent.parent
+M = TypeVar("M")
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
 # CI replays the same examples every run (a submission must not pass or fail by luck);
@@ -107,3 +111,33 @@ def pid_alive(pid: int) -> bool:
             return f.read().split()[2] != "Z"
     except FileNotFoundError:
         return False
+
+
+class Record(list[M]):
+    """Every message on a topic as it arrives, and waits on what has arrived."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cond = threading.Condition()
+
+    def add(self, m: M) -> None:
+        with self.cond:
+            self.append(m)
+            self.cond.notify_all()
+
+    def until(self, done: Callable[[list[M]], bool], timeout: float) -> bool:
+        """Whether ``done(messages so far)`` came true within ``timeout`` seconds."""
+        with self.cond:
+            return self.cond.wait_for(lambda: done(self), timeout)
+
+    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
+        """The newest message satisfying ``pred``, waiting up to ``timeout`` for one."""
+        self.until(lambda ms: any(pred(m) for m in ms[-50:]), timeout)
+        with self.cond:
+            return next((m for m in reversed(self) if pred(m)), None)
+
+
+def record(bus: Bus, topic: Topic[M]) -> Record[M]:
+    out: Record[M] = Record()
+    bus.subscribe(topic, out.add)
+    return out

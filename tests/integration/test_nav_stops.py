@@ -6,19 +6,16 @@ from __future__ import annotations
 import math
 import os
 import signal
-import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
 from common import keys
 from common.cli import wait_alive
-from common.keys import Topic
 from common.messages.nav import LEASE_ENDED, FollowRoute, Leg, NavState
 from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
-from tests.conftest import Procs
+from tests.conftest import Procs, record
 
 SIM = ("--clock", "sim", "--field", "engr")
 M = TypeVar("M")
@@ -83,30 +80,6 @@ STILL = 0.02
 
 def first_still_after(truth: list[TruthPose], t_ns: int) -> TruthPose | None:
     return next((t for t in truth if t.stamp_ns >= t_ns and abs(t.v) < STILL), None)
-
-
-class Record(list[M]):
-    """Every message on a topic, and a wait for one that satisfies a predicate."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.cond = threading.Condition()
-
-    def add(self, m: M) -> None:
-        with self.cond:
-            self.append(m)
-            self.cond.notify_all()
-
-    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
-        with self.cond:
-            self.cond.wait_for(lambda: any(pred(m) for m in self[-50:]), timeout)
-            return next((m for m in reversed(self) if pred(m)), None)
-
-
-def record(bus: Bus, topic: Topic[M]) -> Record[M]:
-    out: Record[M] = Record()
-    bus.subscribe(topic, out.add)
-    return out
 
 
 def test_losing_rtk_stops_the_robot_within_a_second(

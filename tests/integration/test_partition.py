@@ -22,7 +22,7 @@ from common import keys
 from common.config import zenoh_config
 from common.messages.mission import MissionEvent
 from common.transport import Bus
-from tests.conftest import free_port
+from tests.conftest import free_port, record
 
 
 class Relay:
@@ -106,47 +106,40 @@ def test_events_of_a_partition_reach_the_base_station_when_it_heals(
     link: tuple[Bus, Bus, Relay],
 ) -> None:
     mission, viz, relay = link
-    got: list[str] = []
-    cond = threading.Condition()
-
-    def on_event(e: MissionEvent) -> None:
-        with cond:
-            got.append(e.text)
-            cond.notify_all()
-
-    def wait_for(texts: list[str], timeout: float) -> bool:
-        with cond:
-            return cond.wait_for(lambda: all(t in got for t in texts), timeout)
-
     # the same stream without history, as a control: its gap is lost
     plain_topic = dataclasses.replace(
         keys.MISSION_EVENT, key=f"{keys.PREFIX}/test/plain", history=0
     )
-    plain_got: list[str] = []
-    viz.subscribe(plain_topic, lambda e: plain_got.append(e.text))
+    plain_events = record(viz, plain_topic)
     plain = mission.publisher(plain_topic)
     pub = mission.publisher(keys.MISSION_EVENT)
     pub.put(MissionEvent(mission="m", level="info", text="before 0"))
-    viz.subscribe(keys.MISSION_EVENT, on_event)
-    # a late subscriber gets the history; then the live stream
-    assert wait_for(["before 0"], timeout=10), got
+    events = record(viz, keys.MISSION_EVENT)  # a late subscriber gets the history
+
+    def texts() -> list[str]:
+        return [m.text for m in list(events)]
+
+    def wait_for(want: list[str], timeout: float) -> bool:
+        return events.until(lambda ms: set(want) <= {m.text for m in ms}, timeout)
+
+    assert wait_for(["before 0"], timeout=10), texts()
     pub.put(MissionEvent(mission="m", level="info", text="before 1"))
-    assert wait_for(["before 1"], timeout=5), got
+    assert wait_for(["before 1"], timeout=5), texts()
 
     relay.cut()
     gap = [f"gap {k}" for k in range(20)]
     for text in gap:
         pub.put(MissionEvent(mission="m", level="warning", text=text))
         plain.put(MissionEvent(mission="m", level="warning", text=text))
-    with cond:  # nothing crosses a cut link
-        assert not cond.wait_for(lambda: "gap 0" in got, timeout=2.0), got
+    assert not wait_for(["gap 0"], timeout=2.0), "an event crossed a cut link"
     relay.restore()
     t0 = time.monotonic()
-    assert wait_for(gap, timeout=10), f"missing after the link came back: {got}"
+    assert wait_for(gap, timeout=10), f"missing after the link came back: {texts()}"
     healed = time.monotonic() - t0
     assert healed <= 2.0, f"the gap's events arrived {healed:.1f} s after the link's return"
-    assert len(got) == len(set(got)), f"an event came twice: {got}"
+    assert len(texts()) == len(set(texts())), f"an event came twice: {texts()}"
     pub.put(MissionEvent(mission="m", level="info", text="after"))
     plain.put(MissionEvent(mission="m", level="info", text="after"))
     assert wait_for(["after"], timeout=5)
-    assert not any(t.startswith("gap") for t in plain_got), "the control kept its gap"
+    assert plain_events.until(lambda ms: any(m.text == "after" for m in ms), timeout=5)
+    assert not any(m.text.startswith("gap") for m in plain_events), "the control kept its gap"

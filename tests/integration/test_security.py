@@ -29,7 +29,7 @@ from common.launcher import router_config
 from common.messages.mission import MissionEvent
 from common.preflight import validate
 from common.transport import Bus
-from tests.conftest import REPO, Procs, free_port
+from tests.conftest import REPO, Procs, free_port, record
 from tests.integration.test_tls import make_certs
 
 HEALTH = "phenorover/health/probe"  # every machine may publish health: the marker
@@ -306,21 +306,11 @@ def test_the_base_station_gets_the_missions_events_with_their_history(
     mission = Bus(robot.session, "mission")
     pub = mission.publisher(keys.MISSION_EVENT)
     pub.put(MissionEvent(mission="m", level="info", text="before the base station"))
-    got: list[str] = []
-    cond = threading.Condition()
-
-    def on_event(e: MissionEvent) -> None:
-        with cond:
-            got.append(e.text)
-            cond.notify_all()
-
     with zenoh.open(zenoh_config("client", [], [remote_ep], tls["basestation"])) as s:
         viz = Bus(s, "viz")
-        viz.subscribe(keys.MISSION_EVENT, on_event)
-        with cond:
-            assert cond.wait_for(lambda: "before the base station" in got, timeout=10), got
+        events = record(viz, keys.MISSION_EVENT)
+        assert events.wait_for(lambda e: e.text == "before the base station", timeout=10)
         pub.put(MissionEvent(mission="m", level="info", text="live"))
-        with cond:
-            assert cond.wait_for(lambda: "live" in got, timeout=10), got
+        assert events.wait_for(lambda e: e.text == "live", timeout=10)
         viz.close()
     mission.close()

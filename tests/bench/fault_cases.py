@@ -1,0 +1,322 @@
+"""The fault campaign's cases (run by tests/bench/fault_campaign.py): what each
+injects, what it expects, and how it judges the survey against the simulator's truth."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import signal
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from common import keys
+from common.cli import wait_alive
+from common.messages.mission import MissionPhase, MissionState
+from common.messages.nav import NavState
+from common.messages.sim import TruthPose
+from services.mission.log import MissionLog
+from tests.conftest import Procs
+from tests.integration.test_mission import Deployment
+
+TOLERANCE_M = 0.05  # the mission's arrival tolerance
+STILL = 0.02  # m/s: below it the drivetrain's lag leaves millimetres to roll
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    name: str
+    fault: str
+    expectation: str
+    run: Callable[[Procs, Path], tuple[bool, str, dict[str, float]]]
+
+
+# --- what the cases observe ---
+class Truth:
+    def __init__(self, d: Deployment) -> None:
+        self.samples: list[TruthPose] = []
+        d.bus.subscribe(keys.SIM_TRUTH, self.samples.append)
+
+    def still_after(self, t_ns: int, timeout: float = 30.0) -> TruthPose | None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            s = next((p for p in self.samples if p.stamp_ns > t_ns and abs(p.v) < STILL), None)
+            if s is not None:
+                return s
+            time.sleep(0.1)  # polling a recording, not synchronising a test
+        return None
+
+
+def survey_verdict(d: Deployment, mission: str, truth: Truth) -> tuple[bool, str, dict[str, float]]:
+    """Every location done once, its true pose during the scan within tolerance."""
+    log = MissionLog(d.runs / mission / "mission.db")
+    steps = log.steps()
+    integrity = log.db.execute("PRAGMA integrity_check").fetchone()[0]
+    log.close()
+    worst = 0.0
+    for st in steps:
+        if st.status != "done" or st.started_ns is None or st.ended_ns is None:
+            continue
+        during = [t for t in truth.samples if st.started_ns <= t.stamp_ns <= st.ended_ns]
+        if during:
+            worst = max(worst, max(math.hypot(t.x - st.x, t.y - st.y) for t in during))
+    done = sum(st.status == "done" for st in steps)
+    files_ok = all(st.file and Path(st.file).is_file() for st in steps if st.status == "done")
+    ok = done == len(steps) and worst <= TOLERANCE_M and integrity == "ok" and files_ok
+    text = (
+        f"{done}/{len(steps)} done, true pose during scans within {100 * worst:.1f} cm, "
+        f"mission.db {integrity}{'' if files_ok else ', a scan file missing'}"
+    )
+    return ok, text, {"done": done, "total": len(steps), "worst_true_offset_m": worst}
+
+
+def finish(d: Deployment, mission: str, timeout: float = 600) -> MissionState:
+    s = d.wait(
+        lambda x: x.mission == mission and x.phase in (MissionPhase.DONE, MissionPhase.FAILED),
+        timeout=timeout,
+    )
+    return s
+
+
+def pid_of(d: Deployment, service: str) -> int:
+    return next(a.pid for a in wait_alive(d.session, {service}, 10) if a.service == service)
+
+
+def wait_driving(d: Deployment, scan: int) -> None:
+    progress = d.bus.latest(keys.NAV_PROGRESS)
+    d.wait(lambda x: x.phase == MissionPhase.DRIVING and x.current_scan == scan)
+    got = progress.wait_for(
+        lambda p: f".{scan}." in p.route_id and p.state == NavState.DRIVING, timeout=120
+    )
+    assert got is not None, "never drove toward the location"
+
+
+# --- the cases ---
+def kill_case(service: str, phase: str) -> Case:
+    def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
+        extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
+        d = Deployment(procs, tmp, extra)
+        try:
+            truth = Truth(d)
+            s = d.start()
+            if phase == "driving":
+                wait_driving(d, 2)
+            else:
+                d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
+            os.kill(pid_of(d, service), signal.SIGKILL)
+            finish(d, s.mission)
+            ok, text, figs = survey_verdict(d, s.mission, truth)
+            restarts = d.log.read_text().count(f"restarting service {service}")
+            return ok and restarts >= 1, f"{text}; {service} restarted {restarts}x", figs
+        finally:
+            d.close()
+
+    return Case(
+        f"kill-{service}-{phase}",
+        f"SIGKILL {service} while {phase}",
+        "restarted; survey completes, every location done once, true pose within 5 cm",
+        run,
+    )
+
+
+def stop_case(service: str) -> Case:
+    def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
+        d = Deployment(procs, tmp, rtf=4.0, field_timers=True)
+        try:
+            truth = Truth(d)
+            d.start()
+            wait_driving(d, 2)
+            while not truth.samples or abs(truth.samples[-1].v) < 0.3:
+                time.sleep(0.05)  # polling a recording: until the robot is at speed
+            os.kill(pid_of(d, service), signal.SIGKILL)
+            at = truth.samples[-1]
+            still = truth.still_after(at.stamp_ns)
+            if still is None:
+                return False, "never stood still", {}
+            dt = (still.stamp_ns - at.stamp_ns) / 1e9
+            dist = math.hypot(still.x - at.x, still.y - at.y)
+            figs = {"stop_s": dt, "stop_m": dist, "speed_at_kill": at.v}
+            text = f"stood {dt:.2f} s and {100 * dist:.1f} cm after the kill, from {at.v:.2f} m/s"
+            return dt <= 0.5 and dist <= 0.2, text, figs
+        finally:
+            d.close()
+
+    return Case(
+        f"stop-{service}-killed",
+        f"SIGKILL {service} while driving (4x, field timers)",
+        "the robot (truth) stands within 0.5 s and 0.2 m",
+        run,
+    )
+
+
+def power_cut(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
+    """Every process SIGKILLed mid-scan at once, the launcher too; then the launcher
+    is started again, as after a reboot. The world has no power to lose: the
+    simulator, killed with the rest, continues its world from its snapshot (a named
+    deployment lets it across launchers)."""
+    os.environ["PHENOROVER_SIM_DEPLOYMENT"] = f"power-cut-{os.getpid()}-{time.time_ns()}"
+    d = Deployment(procs, tmp)
+    try:
+        truth = Truth(d)
+        s = d.start()
+        d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
+        # the services first: a launcher that dies first sends them SIGTERM, and a
+        # power cut lets nobody shut down cleanly
+        for a in wait_alive(d.session, {"mission"}, 10):
+            os.kill(a.pid, signal.SIGKILL)
+        d.up.kill()
+        d.up.wait()
+        d.up = procs.start("-m", "common.cli", "up", str(tmp / "m.toml"), log=tmp / "up2.log")
+        final = finish(d, s.mission)
+        ok, text, figs = survey_verdict(d, s.mission, truth)
+        resumed = "resuming mission" in (tmp / "up2.log").read_text()
+        done = final.phase == MissionPhase.DONE
+        return ok and resumed and done, f"{text}; resumed by itself: {resumed}", figs
+    finally:
+        d.close()
+        del os.environ["PHENOROVER_SIM_DEPLOYMENT"]
+
+
+def periodic(
+    kind: str, first_s: float, every_s: float, for_s: float, n: int, more: str = ""
+) -> str:
+    """``n`` windows of a sim fault: the survey's timing is not known in advance, so the
+    fault recurs and the robot meets it driving, settling and scanning alike."""
+    return "".join(
+        f"[[services.sim.faults]]\nkind = '{kind}'\nat_s = {first_s + k * every_s}\n"
+        f"for_s = {for_s}\n{more}"
+        for k in range(n)
+    )
+
+
+def fault_case(
+    name: str,
+    fault: str,
+    expectation: str,
+    sim: str = "",
+    scanner: str = "",
+    rtf: float = 20.0,
+    failed: tuple[int, ...] = (),
+    stops: tuple[float, float] | None = None,
+) -> Case:
+    """A survey under a scheduled sim fault (``sim``: ``[[services.sim.faults]]``
+    entries) or scanner fault (``scanner``: ``sim_faults`` keys). Expectation: the
+    survey completes, the scans ``failed`` (ids) failed and every other one done within
+    tolerance by the truth; with ``stops`` = (kind's windows' first at_s, every_s),
+    the robot stood within 1 s of each window that began while it drove."""
+
+    def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
+        extra = (f"[services.scanner.sim_faults]\n{scanner}\n" if scanner else "") + sim
+        d = Deployment(procs, tmp, extra, rtf=rtf, field_timers=rtf <= 4)
+        try:
+            truth = Truth(d)
+            s = d.start()
+            final = finish(d, s.mission, timeout=1200)
+            steps = MissionLog(d.runs / s.mission / "mission.db").steps()
+            want_failed = [st.scan_id for st in steps if st.status == "failed"]
+            ok, text, figs = survey_verdict(d, s.mission, truth)
+            if failed:
+                ok = want_failed == list(failed) and figs["done"] == figs["total"] - len(failed)
+                text += f"; failed: {want_failed}"
+            if stops is not None:
+                worst = stop_times(truth, *stops)
+                figs["worst_stop_s"] = worst
+                text += f"; stood within {worst:.2f} s of each outage met driving"
+                ok = ok and worst <= 1.0
+            return ok and final.phase == MissionPhase.DONE, text, figs
+        finally:
+            d.close()
+
+    return Case(name, fault, expectation, run)
+
+
+def stop_times(truth: Truth, first_s: float, every_s: float) -> float:
+    """The longest time from a fault window's start to standing, over the windows that
+    began while the robot drove (|v| > 0.2 m/s); 0 when none did."""
+    worst = 0.0
+    k = 0
+    samples = truth.samples
+    while samples and first_s + k * every_s < samples[-1].stamp_ns / 1e9:
+        t0 = int((first_s + k * every_s) * 1e9)
+        k += 1
+        before = [p for p in samples if p.stamp_ns <= t0]
+        if not before or abs(before[-1].v) <= 0.2:
+            continue
+        still = next((p for p in samples if p.stamp_ns > t0 and abs(p.v) < STILL), None)
+        worst = max(worst, math.inf if still is None else (still.stamp_ns - t0) / 1e9)
+    return worst
+
+
+FAULTS: list[Case] = [
+    fault_case(
+        "rtk-outage",
+        "RTK outage, both antennas, 20 s every 80 s (4x, field timers)",
+        "stands within 1 s of an outage met driving; no scan on a bad pose; completes",
+        sim=periodic("rtk_outage", 60.0, 80.0, 20.0, 12),
+        rtf=4.0,
+        stops=(60.0, 80.0),
+    ),
+    fault_case(
+        "rtk-float",
+        "RTK float on antenna 2, 30 s every 90 s",
+        "float is not fused: waits it out; completes, scans within tolerance",
+        sim=periodic("rtk_float", 40.0, 90.0, 30.0, 10, "antenna = 2\n"),
+    ),
+    fault_case(
+        "multipath",
+        "0.4 m jump on antenna 1 reported as RTK fixed, 5 s every 60 s",
+        "the EKF gates the jump; completes, scans within tolerance",
+        sim=periodic("multipath", 30.0, 60.0, 5.0, 15, "antenna = 1\noffset_m = [0.4, 0.0]\n"),
+    ),
+    fault_case(
+        "odometry-freeze",
+        "wheel encoders read zero, 10 s every 70 s",
+        "completes, scans within tolerance",
+        sim=periodic("odometry_freeze", 35.0, 70.0, 10.0, 12),
+    ),
+    fault_case(
+        "scanner-error",
+        "FARO error code 42 on every attempt at scan 2",
+        "scan 2 failed after its retries, the others done; completes",
+        scanner="error_code = 42\nerror_scan_ids = [2]",
+        failed=(2,),
+    ),
+    fault_case(
+        "scanner-stuck",
+        "scan 2 stuck at 40 % on every attempt",
+        "the stuck scan is noticed (no wait outlives its deadline); scan 2 failed; completes",
+        scanner="stuck_at_pct = 40.0\nstuck_scan_ids = [2]",
+        failed=(2,),
+    ),
+    fault_case(
+        "scanner-lost-acks",
+        "the first 3 CAN ACKs lost",
+        "commands resent; completes, every scan done",
+        scanner="lose_first_acks = 3",
+    ),
+    fault_case(
+        "can-bus-off",
+        "CAN bus-off for 8 s during scan 2",
+        "completes, every scan done",
+        scanner="bus_off_for_s = 8.0\nbus_off_scan_ids = [2]",
+    ),
+]
+
+
+CASES: list[Case] = [
+    *(
+        kill_case(s, p)
+        for p in ("driving", "scanning")
+        for s in ("sim", "gnss", "base", "nav", "scanner", "mission", "planner", "viz")
+    ),
+    stop_case("nav"),
+    stop_case("mission"),
+    Case(
+        "power-cut-mid-scan",
+        "every service and the launcher SIGKILLed mid-scan, launcher started again",
+        "resumes by itself; every scan within tolerance; files whole; integrity ok",
+        power_cut,
+    ),
+    *FAULTS,
+]
