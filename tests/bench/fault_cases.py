@@ -248,7 +248,64 @@ def stop_times(truth: Truth, first_s: float, every_s: float) -> float:
     return worst
 
 
+def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
+    """30 s of garbage on every key of the table (topics and queries): random bytes,
+    other types, non-finite values; and nav's absurd well-typed inputs. Velocity
+    commands and e-stops get only what cannot decode: a well-typed one would drive the
+    robot legitimately, which access control, not decoding, must prevent."""
+    import random
+
+    import msgspec
+
+    from common.messages.system import Health
+    from tests.integration.test_fuzz import TOPIC_KEYS, absurd
+
+    d = Deployment(procs, tmp)
+    try:
+        truth = Truth(d)
+        health: dict[str, Health] = {}
+        d.bus.subscribe(keys.HEALTH.at(service="*"), lambda h: health.__setitem__(h.service, h))
+        poses: list[float] = []
+        d.bus.subscribe(keys.NAV_POSE, lambda p: poses.extend((p.x, p.y, p.yaw, p.v, p.w)))
+        rng = random.Random(7)
+        topics = [k.replace("{antenna}", "1").replace("{service}", "x") for k in keys.TOPICS]
+        rpcs = [k.replace("{service}", "nav") for k in keys.RPCS]
+        bad = [msgspec.msgpack.encode({"x": math.nan, "stamp_ns": -1}), b"\xc1", b""]
+        t_end, n = time.monotonic() + 30.0, 0
+        while time.monotonic() < t_end:
+            key = rng.choice(topics)
+            if key in TOPIC_KEYS and rng.random() < 0.5:
+                data = absurd(rng, key, truth.samples[-1].stamp_ns if truth.samples else 0)
+            else:
+                data = rng.choice([rng.randbytes(rng.randrange(64)), *bad])
+            d.bus.put_raw(key, data)
+            if n % 50 == 0:
+                list(d.session.get(rng.choice(rpcs), payload=rng.choice(bad), timeout=0.5))
+            n += 1
+            time.sleep(0.002)  # pacing the input, not synchronising
+        time.sleep(2.0)  # the last heartbeats
+        moved = max((abs(p.v) for p in truth.samples), default=0.0)
+        restarts = d.log.read_text().count("restarting service")
+        finite = all(math.isfinite(v) for v in poses)
+        rejects = {s: h.decode_errors + h.callback_errors for s, h in health.items()}
+        counted = all(rejects.get(s, 0) > 0 for s in ("nav", "base", "gnss", "mission"))
+        ok = restarts == 0 and finite and moved < STILL and counted and bool(poses)
+        text = (
+            f"{n} messages; {restarts} restarts; estimate finite: {finite}; robot's top "
+            f"speed {moved:.3f} m/s; rejects counted: {rejects}"
+        )
+        return ok, text, {"messages": n, "restarts": restarts, "top_speed": moved}
+    finally:
+        d.close()
+
+
 FAULTS: list[Case] = [
+    Case(
+        "fuzz-every-key",
+        "30 s of random bytes, wrong types, non-finite and absurd values on every key",
+        "no crash or restart, no non-finite estimate, rejects counted, the robot stands",
+        fuzz_deployment,
+    ),
     fault_case(
         "rtk-outage",
         "RTK outage, both antennas, 20 s every 80 s (4x, field timers)",
