@@ -169,7 +169,9 @@ class Survey:
                     return False, "navigation blocked"
                 if p.state == NavState.FAILED and not p.detail.startswith(LEASE_ENDED):
                     return False, f"navigation failed: {p.detail}"
-                if p.state == NavState.FAILED:  # held up past the lease (paused, say)
+                if p.state == NavState.FAILED and p.stamp_ns > sent + SKEW_NS:
+                    # held up past the lease (paused, say); a FAILED stamped about when
+                    # the route was last sent may be the one that resent it
                     self.event("warning", f"{rid}: lease ran out, sending the route again")
                     sent = renewed = self._send(seg, rid)
                     continue
@@ -247,20 +249,30 @@ class Survey:
     # --- scanning ---
     def found_on_scanner(self, step: Step) -> bool:
         """A step the mission left in ``scanning`` (it restarted): True, and recorded,
-        when the scanner finished that scan and the robot still stands where planned."""
+        when the scanner finished that scan, or finishes the one it is still taking,
+        and the robot stands where planned; never a second scan of a location that
+        has one."""
         t0 = self.now()
         while (st := self.scanner.get()) is None:  # a restarted mission hears it soon
             if (self.now() - t0) / NS > self.cfg.scanner_lost_s:
                 return False
             t0 += self.wait(0.1)
-        if st.scan_id != step.scan_id or st.state != ScannerState.DONE:
+        if st.scan_id != step.scan_id or st.state not in (ScannerState.DONE, ScannerState.SCANNING):
             return False
         p = self.settle()
         if p is None or self.off_by(step, p.x, p.y) > self.cfg.arrival_tolerance_m:
             return False
-        self.event("info", f"scan {step.scan_id}: found done on the scanner after a restart")
-        self._record(step, st, [p])
-        return True
+        what = "done" if st.state == ScannerState.DONE else "still scanning"
+        self.event("info", f"scan {step.scan_id}: found {what} on the scanner after a restart")
+        if st.state == ScannerState.DONE:
+            return not self._record(step, st, [p])
+        with self._lock:  # the pose over the rest of the scan
+            self._collect = [p]
+        try:
+            return not self._await_scan(step)
+        finally:
+            with self._lock:
+                self._collect = None
 
     def scan(self, step: Step, prof: ScanProfile) -> str:
         """One attempt at ``step``'s scan: "" when done and recorded, else why not."""
