@@ -284,6 +284,10 @@ class Survey:
         try:
             self.call(keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission))
         except RpcError as exc:
+            # a device still busy with a failed scan (stuck, say) refuses the next:
+            # end whatever it is doing before the next attempt
+            self._stop_scan()
+            self.wait(2.0)
             return f"start failed: {exc}"
         try:
             return self._await_scan(step)
@@ -310,6 +314,9 @@ class Survey:
                 continue
             seen = now
             if st.state == ScannerState.ERROR:
+                # the service gave up on the scan (stuck, silent); the device may still
+                # be taking it, and would refuse the next one as busy
+                self._stop_scan()
                 self.wait(1.0)
                 return f"scanner error: {st.error}"
             if st.state == ScannerState.DONE:

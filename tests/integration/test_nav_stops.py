@@ -15,7 +15,7 @@ from common.cli import wait_alive
 from common.messages.nav import LEASE_ENDED, FollowRoute, Leg, NavState
 from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
-from tests.conftest import Procs, record
+from tests.conftest import Procs, Record, record
 
 SIM = ("--clock", "sim", "--field", "engr")
 M = TypeVar("M")
@@ -82,18 +82,24 @@ def first_still_after(truth: list[TruthPose], t_ns: int) -> TruthPose | None:
     return next((t for t in truth if t.stamp_ns >= t_ns and abs(t.v) < STILL), None)
 
 
+def drive_west(bus: Bus) -> Record[TruthPose]:
+    """Send WEST and return the truth recorded from before it, once the robot drives."""
+    truth = record(bus, keys.SIM_TRUTH)
+    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
+    send_route(bus, WEST)
+    assert bus.latest(keys.NAV_PROGRESS).wait_for(
+        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.0, timeout=60
+    )
+    return truth
+
+
 def test_losing_rtk_stops_the_robot_within_a_second(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
     pids = start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
-    truth = record(client_bus, keys.SIM_TRUTH)
-    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
     fixes = record(client_bus, keys.GNSS_FIX.at(antenna=1))
+    truth = drive_west(client_bus)
     progress = client_bus.latest(keys.NAV_PROGRESS)
-    send_route(client_bus, WEST)
-    assert progress.wait_for(
-        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.0, timeout=60
-    )
     os.kill(pids["gnss"], signal.SIGKILL)  # no more fixes
     killed = truth[-1].stamp_ns
     lost = progress.wait_for(lambda p: p.state == NavState.NOT_LOCALIZED, timeout=30)
@@ -132,14 +138,8 @@ def test_navigation_killed_while_driving_the_base_stops_the_wheels(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
     pids = start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
-    truth = record(client_bus, keys.SIM_TRUTH)
-    assert truth.wait_for(lambda t: True, timeout=10), "no truth from the simulator"
     cmds = record(client_bus, keys.BASE_CMD_VEL)
-    progress = client_bus.latest(keys.NAV_PROGRESS)
-    send_route(client_bus, WEST)
-    assert progress.wait_for(
-        lambda p: p.state == NavState.DRIVING and p.distance_to_go < 8.0, timeout=60
-    )
+    truth = drive_west(client_bus)
     os.kill(pids["nav"], signal.SIGKILL)
     assert truth and cmds, (len(truth), len(cmds))
     killed = truth[-1].stamp_ns
