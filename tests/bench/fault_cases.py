@@ -17,7 +17,7 @@ from common.messages.mission import MissionPhase, MissionState
 from common.messages.nav import NavState
 from common.messages.sim import TruthPose
 from services.mission.log import MissionLog
-from tests.conftest import Procs
+from tests.conftest import Procs, Record, record
 from tests.integration.test_mission import Deployment
 
 TOLERANCE_M = 0.05  # the mission's arrival tolerance
@@ -35,17 +35,16 @@ class Case:
 # --- what the cases observe ---
 class Truth:
     def __init__(self, d: Deployment) -> None:
-        self.samples: list[TruthPose] = []
-        d.bus.subscribe(keys.SIM_TRUTH, self.samples.append)
+        self.samples: Record[TruthPose] = record(d.bus, keys.SIM_TRUTH)
 
     def still_after(self, t_ns: int, timeout: float = 30.0) -> TruthPose | None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            s = next((p for p in self.samples if p.stamp_ns > t_ns and abs(p.v) < STILL), None)
-            if s is not None:
-                return s
-            time.sleep(0.1)  # polling a recording, not synchronising a test
-        return None
+        """The first true pose after ``t_ns`` with the robot standing."""
+
+        def still(p: TruthPose) -> bool:
+            return p.stamp_ns > t_ns and abs(p.v) < STILL
+
+        self.samples.until(lambda ms: any(still(p) for p in ms[-50:]), timeout)
+        return next((p for p in list(self.samples) if still(p)), None)
 
 
 def survey_verdict(d: Deployment, mission: str, truth: Truth) -> tuple[bool, str, dict[str, float]]:
@@ -127,8 +126,8 @@ def stop_case(service: str) -> Case:
             truth = Truth(d)
             d.start()
             wait_driving(d, 2)
-            while not truth.samples or abs(truth.samples[-1].v) < 0.3:
-                time.sleep(0.05)  # polling a recording: until the robot is at speed
+            at_speed = truth.samples.until(lambda ms: bool(ms) and abs(ms[-1].v) >= 0.3, 60)
+            assert at_speed, "the robot never reached 0.3 m/s"
             os.kill(pid_of(d, service), signal.SIGKILL)
             at = truth.samples[-1]
             still = truth.still_after(at.stamp_ns)
@@ -249,6 +248,10 @@ def stop_times(truth: Truth, first_s: float, every_s: float) -> tuple[float, int
     return worst, met
 
 
+def more_than(n: int) -> Callable[[list[TruthPose]], bool]:
+    return lambda ms: len(ms) > n
+
+
 def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
     """30 s of garbage on every key of the table (topics and queries): random bytes,
     other types, non-finite values; and nav's absurd well-typed inputs. Velocity
@@ -264,8 +267,7 @@ def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float
     d = Deployment(procs, tmp)
     try:
         truth = Truth(d)
-        health: dict[str, Health] = {}
-        d.bus.subscribe(keys.HEALTH.at(service="*"), lambda h: health.__setitem__(h.service, h))
+        beats: Record[Health] = record(d.bus, keys.HEALTH.at(service="*"))
         poses: list[float] = []
         d.bus.subscribe(keys.NAV_POSE, lambda p: poses.extend((p.x, p.y, p.yaw, p.v, p.w)))
         rng = random.Random(7)
@@ -283,13 +285,18 @@ def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float
             if n % 50 == 0:
                 list(d.session.get(rng.choice(rpcs), payload=rng.choice(bad), timeout=0.5))
             n += 1
-            time.sleep(0.002)  # pacing the input, not synchronising
-        time.sleep(2.0)  # the last heartbeats
+            if n % 3 == 0:  # paced by the world: three per true pose (200 Hz at 20x)
+                truth.samples.until(more_than(len(truth.samples)), timeout=1.0)
+        # every service's heartbeat from after the fuzz, with its final counts
+        end = time.time_ns()
+        names = ("nav", "base", "gnss", "mission")
+        beats.until(lambda hs: {h.service for h in hs if h.stamp_ns > end} >= set(names), 10)
+        health = {h.service: h for h in list(beats)}
         moved = max((abs(p.v) for p in truth.samples), default=0.0)
         restarts = d.log.read_text().count("restarting service")
         finite = all(math.isfinite(v) for v in poses)
         rejects = {s: h.decode_errors + h.callback_errors for s, h in health.items()}
-        counted = all(rejects.get(s, 0) > 0 for s in ("nav", "base", "gnss", "mission"))
+        counted = all(rejects.get(s, 0) > 0 for s in names)
         ok = restarts == 0 and finite and moved < STILL and counted and bool(poses)
         text = (
             f"{n} messages; {restarts} restarts; estimate finite: {finite}; robot's top "

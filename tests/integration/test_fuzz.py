@@ -35,8 +35,8 @@ from common.transport import Bus, RpcError, decode
 from tests.conftest import Procs
 
 FUZZ_S = 5.0
-PERIOD_S = 0.002  # one fuzz message every 2 ms: ~2500 in all
 CLOCK_PERIOD_S = 0.02  # the fake simulator's clock, 50 Hz at real time
+PER_TICK = 10  # fuzz messages per clock tick: ~2500 in all
 NAN, INF = math.nan, math.inf
 
 FIX_KEYS = [keys.GNSS_FIX.at(antenna=a).key for a in (1, 2)]
@@ -136,6 +136,7 @@ class FakeSimClock:
         self.pub = bus.publisher(keys.SIM_CLOCK)
         self.sim_ns = 1000 * NS
         self._stop = threading.Event()
+        self.tick = threading.Condition()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
@@ -143,7 +144,15 @@ class FakeSimClock:
         while not self._stop.wait(CLOCK_PERIOD_S):
             t = self.sim_ns + int(CLOCK_PERIOD_S * NS)
             self.pub.put(SimClock(stamp_ns=t, sim_ns=t))
-            self.sim_ns = t
+            with self.tick:
+                self.sim_ns = t
+                self.tick.notify_all()
+
+    def wait_tick(self, timeout: float = 1.0) -> bool:
+        """Block until the clock's next tick (True) or ``timeout`` seconds."""
+        with self.tick:
+            t = self.sim_ns
+            return self.tick.wait_for(lambda: self.sim_ns > t, timeout)
 
     def close(self) -> None:
         self._stop.set()
@@ -185,7 +194,8 @@ def fuzz(
             query(bus, keys.NAV_CMD.key, req)
             calls += 1
         k += 1
-        time.sleep(max(0.0, t0 + k * PERIOD_S - time.monotonic()))  # pacing only
+        if k % PER_TICK == 0:  # paced by the fake simulator's clock
+            assert clock.wait_tick(), "the fake simulator's clock stopped"
     last_legit = clock.sim_ns
 
     # still alive and serving, and on the real clock: time went on past the fuzz
