@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 export MPLBACKEND := Agg
 
-.PHONY: test lint typecheck pytest sim bench faults e2e venv clean
+.PHONY: test lint typecheck pytest sim bench faults soak e2e venv clean
 
 venv: $(STAMP)
 
@@ -43,6 +43,11 @@ bench: $(STAMP)
 # the table in docs/faults.md. About half an hour on two cores.
 faults: $(STAMP)
 	$(BIN)/python tests/bench/fault_campaign.py
+
+# Ten whole `phenorover sim --field F` runs of SPL and of two fields of our own, in a
+# row; writes docs/soak.md. About an hour on two cores.
+soak: $(STAMP)
+	$(BIN)/python tests/bench/soak.py
 
 # The dashboard in a real browser: Debian's chromium (apt-get install chromium) opens
 # the served web viewer during a short simulated survey; about two minutes.

@@ -21,6 +21,7 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     max_speed: Pos = 1.0
     max_turn_rate: Pos = 2.0
     watchdog_s: Pos = 0.25
+    commander: str = "nav"
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0
     # encoder noise the odometry reports as variance per unit travelled/turned
     var_v: Annotated[float, msgspec.Meta(ge=0)] = 1e-4

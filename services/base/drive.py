@@ -35,6 +35,12 @@ class CommandGate:
             self._v = self._w = 0.0
             self._last_ns = None
 
+    def hold(self) -> None:
+        """Stop now and until a fresh command: the commander is gone, so its last
+        command must neither run on until the watchdog nor resume later."""
+        self._v = self._w = 0.0
+        self._last_ns = None
+
     def watchdog_tripped(self, now_ns: int) -> bool:
         return self._last_ns is None or now_ns - self._last_ns > self.watchdog_ns
 

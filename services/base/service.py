@@ -9,6 +9,7 @@ from common import clock as clk
 from common import keys
 from common.messages.base import BaseStatus, EStop, LaserScan, Odometry, Twist
 from common.service import Context
+from common.status import parse_token
 from services.base.backends import BACKENDS
 from services.base.config import BaseConfig
 from services.base.drive import CommandGate, OdometryIntegrator
@@ -28,10 +29,16 @@ class BaseService:
         )
         ctx.bus.subscribe(keys.BASE_CMD_VEL, self._on_cmd)
         ctx.bus.subscribe(keys.BASE_ESTOP, self._on_estop)
+        self._commanders: set[str] = set()  # liveliness tokens of the commander
+        ctx.bus.watch_alive(self._on_alive)
 
     def _on_cmd(self, t: Twist) -> None:
+        now = self.ctx.clock.now_ns()
         with self._lock:
-            self.gate.command(t.linear_x, t.angular_z, self.ctx.clock.now_ns())
+            self.gate.command(t.linear_x, t.angular_z, now)
+            v, w = self.gate.output(now)
+        if v == 0.0 and w == 0.0:  # a stop goes to the wheels now, not at the next tick
+            self.drive.send(0.0, 0.0, now)
 
     def _on_estop(self, e: EStop) -> None:
         with self._lock:
@@ -42,6 +49,24 @@ class BaseService:
             self.gate.set_estop(e.asserted, e.reason)
         if e.asserted:
             self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
+
+    def _on_alive(self, token: str, alive: bool) -> None:
+        a = parse_token(token)
+        if a is None or a.service != self.cfg.commander:
+            return
+        if alive:
+            self._commanders.add(token)
+            return
+        if token not in self._commanders:
+            return
+        self._commanders.discard(token)
+        now = self.ctx.clock.now_ns()
+        with self._lock:
+            moving = self.gate.output(now) != (0.0, 0.0)
+            self.gate.hold()
+        self.drive.send(0.0, 0.0, now)
+        if moving:
+            self.ctx.log.warning("%s is gone (%s): wheels stopped", a.service, a.machine)
 
     def _on_encoders(self, stamp_ns: int, v: float, w: float) -> None:
         with self._lock:

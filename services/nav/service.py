@@ -157,6 +157,7 @@ class NavService:
         a = parse_token(token)
         if a is None or a.service != "mission":
             return
+        stopped = False
         with self._lock:
             if alive:
                 self._missions.add(token)
@@ -165,6 +166,10 @@ class NavService:
                 if not self._missions and self.follower.active:
                     self.follower.abandon(f"{LEASE_ENDED}: the mission is gone ({a.machine})")
                     self.ctx.log.warning("mission gone: route %s stopped", self.follower.route_id)
+                    stopped = True
+        if stopped:  # now, not at the next tick: a tick is up to 5 cm at 1 m/s
+            now = self.ctx.clock.now_ns()
+            self.cmd_pub.put(Twist(stamp_ns=now, frame_id="base_link", linear_x=0.0, angular_z=0.0))
 
     def _localized(self, t: float) -> bool:
         """Localized: the filter's uncertainty is within bounds *and* a fix was fused

@@ -49,3 +49,13 @@ def test_odometry_follows_a_circle() -> None:
     assert math.isclose(odo.x, r * math.sin(ang), abs_tol=1e-6)
     assert math.isclose(odo.y, r * (1 - math.cos(ang)), abs_tol=1e-6)
     assert math.isclose(odo.yaw, ang, abs_tol=1e-9)
+
+
+def test_hold_stops_at_once_and_waits_for_a_fresh_command() -> None:
+    g = CommandGate(1.0, 2.0, 250 * MS)
+    g.command(0.5, 0.1, 0)
+    assert g.output(10 * MS) == (0.5, 0.1)
+    g.hold()
+    assert g.output(11 * MS) == (0.0, 0.0) and g.watchdog_tripped(11 * MS)
+    g.command(0.2, 0.0, 20 * MS)
+    assert g.output(21 * MS) == (0.2, 0.0)

@@ -8,8 +8,9 @@ observed, verdict; date, commit, machine). About half an hour on two cores.
 
 Survey cases run the sim at 20x real time with the safety timers given their field
 allowance in wall time (see tests/integration/test_mission.py ``Deployment``); the
-stop cases, which measure how fast the robot stands after a fault, run at 4x with
-the field's own timers. The verdict of a case is its expectation, checked; a case
+stop cases, which measure how fast the robot stands after a fault, run in real time
+with the field's own timers and truth at 50 Hz, and say what the simulated drivetrain
+alone needs to stand from the speed the fault met (tests/bench/drivetrain.py). The verdict of a case is its expectation, checked; a case
 that crashes is a fail with the exception as what was observed.
 """
 

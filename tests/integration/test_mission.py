@@ -36,7 +36,8 @@ class Deployment:
     running ``rtf`` times faster than real time. Safety timers run on sim time, so
     at high ``rtf`` they get the field's allowance in *wall* time (a process late by
     50 ms of wall time is late by a second of sim time at 20x); ``field_timers``
-    keeps the field's own values instead (meaningful at low ``rtf`` only)."""
+    keeps the field's own values instead (meaningful at low ``rtf`` only). ``sim``:
+    more lines for the ``[services.sim]`` table."""
 
     def __init__(
         self,
@@ -45,6 +46,7 @@ class Deployment:
         extra: str = "",
         rtf: float = 20.0,
         field_timers: bool = False,
+        sim: str = "",
     ) -> None:
         self.tmp, self.port = tmp, free_port()
         self.runs = tmp / "runs"
@@ -62,6 +64,7 @@ run_dir = "{self.runs}"
 listen = ["tcp/127.0.0.1:{self.port}"]
 [services.sim]
 real_time_factor = {rtf}
+{sim}
 [services.gnss]
 backend = "sim"
 [services.base]

@@ -144,14 +144,15 @@ def test_navigation_killed_while_driving_the_base_stops_the_wheels(
     assert truth and cmds, (len(truth), len(cmds))
     killed = truth[-1].stamp_ns
     assert truth.wait_for(lambda t: t.stamp_ns > killed and abs(t.v) < STILL, timeout=20)
-    last_cmd = cmds[-1].stamp_ns
-    moving = [t for t in truth if t.stamp_ns <= last_cmd][-1]
+    moving = [t for t in truth if t.stamp_ns <= killed][-1]
     assert abs(moving.v) > 0.2
-    still = first_still_after(truth, last_cmd)
+    still = first_still_after(truth, killed)
     assert still is not None
-    # the watchdog trips 0.25 s after the last command; braking from 0.5 m/s at the
-    # sim's 1 m/s^2 through a 0.15 s lag takes about 0.6 s and 0.15 m more, and truth
-    # comes at 10 Hz: 1.2 s bounds it with a scheduling hiccup to spare (the issue's
-    # 0.5 s is below the braking time alone; see the README's fault table)
-    assert (still.stamp_ns - last_cmd) / 1e9 <= 1.2, (still.stamp_ns - last_cmd) / 1e9
-    assert math.hypot(still.x - moving.x, still.y - moving.y) <= 0.3
+    # the base stops the wheels as nav's liveliness token goes, not 0.25 s later at its
+    # watchdog; braking from 0.5 m/s at the sim's 1 m/s^2 through a 0.15 s lag to below
+    # STILL takes about 0.6 s, truth comes at 10 Hz and sim time runs 4x wall time here
+    stop_s = (still.stamp_ns - killed) / 1e9
+    print(f"stood {stop_s:.2f} s, {math.hypot(still.x - moving.x, still.y - moving.y):.3f} m")
+    assert stop_s <= 1.0, stop_s
+    assert math.hypot(still.x - moving.x, still.y - moving.y) <= 0.2
+    assert "nav is gone" in (tmp_path / "base.log").read_text()
