@@ -58,7 +58,8 @@ def run_once(field: str, log: Path) -> dict[str, object]:
     t0 = time.monotonic()
     with log.open("w") as out:
         code = subprocess.run(
-            [str(REPO / ".venv" / "bin" / "phenorover"), "sim", "--field", field],
+            # python -m from this checkout: its code, whichever checkout is installed
+            [sys.executable, "-m", "common.cli", "sim", "--field", field],
             cwd=REPO,
             stdout=out,
             stderr=subprocess.STDOUT,
