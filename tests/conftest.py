@@ -9,7 +9,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -61,11 +61,15 @@ class Procs:
     def __init__(self) -> None:
         self.procs: list[subprocess.Popen[bytes]] = []
 
-    def start(self, *args: str, log: Path | None = None) -> subprocess.Popen[bytes]:
+    def start(
+        self, *args: str, log: Path | None = None, wrap: Sequence[str] = ()
+    ) -> subprocess.Popen[bytes]:
+        """``python args`` from the repository; ``wrap``: a command that execs it (``ip
+        netns exec NS``), so that the process is still the one that was started."""
         out = open(log, "wb") if log is not None else subprocess.DEVNULL  # noqa: SIM115
         env = dict(os.environ, PYTHONUNBUFFERED="1", PHENOROVER_LOG="info")
         p = subprocess.Popen(
-            [sys.executable, *args], cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env
+            [*wrap, sys.executable, *args], cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env
         )
         self.procs.append(p)
         return p

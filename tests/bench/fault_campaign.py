@@ -10,8 +10,10 @@ Survey cases run the sim at 20x real time with the safety timers given their fie
 allowance in wall time (see tests/integration/test_mission.py ``Deployment``); the
 stop cases, which measure how fast the robot stands after a fault, run in real time
 with the field's own timers and truth at 50 Hz, and say what the simulated drivetrain
-alone needs to stand from the speed the fault met (tests/bench/drivetrain.py). The verdict of a case is its expectation, checked; a case
-that crashes is a fail with the exception as what was observed.
+alone needs to stand from the speed the fault met (tests/bench/drivetrain.py). The
+partition case needs root (network namespaces). The verdict of a case is its
+expectation, checked; a case that crashes is a fail with the exception as what was
+observed.
 """
 
 from __future__ import annotations
@@ -31,8 +33,11 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from tests.bench.fault_cases import CASES  # noqa: E402
+from tests.bench.fault_cases import CASES as FAULTS  # noqa: E402
+from tests.bench.partition_case import CASE as PARTITION  # noqa: E402
 from tests.conftest import Procs  # noqa: E402
+
+CASES = [*FAULTS, PARTITION]
 
 
 @dataclasses.dataclass

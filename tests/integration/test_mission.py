@@ -11,7 +11,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -37,7 +37,8 @@ class Deployment:
     at high ``rtf`` they get the field's allowance in *wall* time (a process late by
     50 ms of wall time is late by a second of sim time at 20x); ``field_timers``
     keeps the field's own values instead (meaningful at low ``rtf`` only). ``sim``:
-    more lines for the ``[services.sim]`` table."""
+    more lines for the ``[services.sim]`` table. ``host`` and ``wrap``: the router's
+    address and a command to run the deployment under (another network namespace)."""
 
     def __init__(
         self,
@@ -47,6 +48,8 @@ class Deployment:
         rtf: float = 20.0,
         field_timers: bool = False,
         sim: str = "",
+        host: str = "127.0.0.1",
+        wrap: Sequence[str] = (),
     ) -> None:
         self.tmp, self.port = tmp, free_port()
         self.runs = tmp / "runs"
@@ -61,7 +64,7 @@ clock = "sim"
 field = "{TINY}"
 run_dir = "{self.runs}"
 [zenoh]
-listen = ["tcp/127.0.0.1:{self.port}"]
+listen = ["tcp/{host}:{self.port}"]
 [services.sim]
 real_time_factor = {rtf}
 {sim}
@@ -84,8 +87,8 @@ settle_s = 1.0
 {lease}
 {extra}""")
         self.log = tmp / "up.log"
-        self.up = procs.start("-m", "common.cli", "up", str(manifest), log=self.log)
-        self.session = zenoh.open(zenoh_config("client", [], [f"tcp/127.0.0.1:{self.port}"]))
+        self.up = procs.start("-m", "common.cli", "up", str(manifest), log=self.log, wrap=wrap)
+        self.session = zenoh.open(zenoh_config("client", [], [f"tcp/{host}:{self.port}"]))
         self.bus = Bus(self.session, "test")
         assert wait_alive(self.session, SERVICES, timeout=60), "deployment did not come up"
         self.state = self.bus.latest(keys.MISSION_STATE)
