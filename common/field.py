@@ -45,6 +45,12 @@ MAX_FILE_BYTES = 64 << 20  # a GeoJSON of MAX_PLOTS polygons is about 10 MB
 PosInt = Annotated[int, msgspec.Meta(gt=0, le=MAX_ROWS)]
 Voxel = Annotated[float, msgspec.Meta(ge=0.01, le=MAX_LENGTH_M)]  # a cell edge (m)
 Corner = Literal["bottom-right", "bottom-left", "top-right", "top-left"]
+# a registration target as set out on site: x, y (field frame, m) and pole height (m)
+Site = tuple[
+    Annotated[float, msgspec.Meta(ge=-MAX_LENGTH_M, le=MAX_LENGTH_M)],
+    Annotated[float, msgspec.Meta(ge=-MAX_LENGTH_M, le=MAX_LENGTH_M)],
+    Annotated[float, msgspec.Meta(gt=0, le=10)],
+]
 
 FIELDS_DIR = Path(__file__).with_name("fields")
 F64 = npt.NDArray[np.float64]
@@ -68,7 +74,8 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     there facing along one of the two lanes. ``origin_*`` (WGS84) georeference the
     field frame origin; ``row_bearing_deg`` is the bearing of the field x axis, degrees
     clockwise from north. ``start_corner`` is where tours start and end (the paper's
-    Origin is the bottom-right corner).
+    Origin is the bottom-right corner). ``targets``: the registration spheres as the
+    surveyor set them out, ``[x, y, pole_height]`` each (field frame, m).
     """
 
     name: str = "field"
@@ -92,6 +99,7 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     origin_alt: Altitude = 0.0
     row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
     start_corner: Corner = "bottom-right"
+    targets: tuple[Site, ...] = ()
 
     @property
     def georeferenced(self) -> bool:

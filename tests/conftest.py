@@ -19,7 +19,7 @@ from hypothesis import settings
 
 from common.config import zenoh_config
 from common.keys import Topic
-from common.launcher import free_loopback_port
+from common.process import free_loopback_port
 from common.transport import Bus
 
 REPO = Path(__file__).resolve().parent.parent

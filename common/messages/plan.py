@@ -98,7 +98,9 @@ class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
 
 class PlanResult(Message, frozen=True, kw_only=True):
     """Everything a survey needs, plus what it took to get it. ``plot_boxes`` is the
-    (P, 6) float64 array of plot boxes; ``origin`` the tour start (x, y)."""
+    (P, 6) float64 array of plot boxes; ``origin`` the tour start (x, y);
+    ``cell_views`` the (C,) int64 count, per cell of the field, of the selected
+    locations that see it (what the dashboard colours the cells by)."""
 
     field: str
     layout: FieldLayout
@@ -113,6 +115,7 @@ class PlanResult(Message, frozen=True, kw_only=True):
     tour: TourSummary
     legs: list[Leg]
     timings: dict[str, NonNegative]
+    cell_views: Array | None = None
 
 
 class PlanRequest(Message, frozen=True, kw_only=True):

@@ -51,7 +51,7 @@ def describe(s: MissionState) -> str:
 
 
 def cmd_mission(args: argparse.Namespace) -> int:
-    from common.cli import connect_or_explain
+    from common.client import connect_or_explain
 
     commands: dict[str, MissionCommand] = {
         "start": MissionStart(mission=args.name, field=args.field, plan_file=args.plan_file),

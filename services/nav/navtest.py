@@ -22,9 +22,9 @@ import tomli_w
 from common import keys
 from common.config import load_manifest
 from common.field import load_field
-from common.launcher import free_loopback_port
 from common.messages.nav import FollowRoute, Leg, NavProgress, NavState, PoseEstimate
 from common.messages.sim import TruthPose
+from common.process import free_loopback_port
 from common.transport import Bus, RpcError
 from services.nav import experiments as ex
 
@@ -136,8 +136,8 @@ def _figures(
 
 
 def run(args: argparse.Namespace) -> int:
-    from common.cli import open_client, wait_alive
-    from common.launcher import Launcher
+    from common.client import open_client, wait_alive
+    from phenorover.launcher import Launcher
 
     out = args.out or Path("runs") / f"nav-{args.experiment}"
     out.mkdir(parents=True, exist_ok=True)

@@ -102,7 +102,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2
     if args.remote:
-        from common.cli import connect_or_explain
+        from common.client import connect_or_explain
         from common.keys import PLANNER_PLAN
         from common.transport import Bus, RpcError
 

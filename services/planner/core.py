@@ -156,4 +156,5 @@ def plan(
         ),
         legs=legs,
         timings=timings,
+        cell_views=Array.of(np.asarray(mat[sel].sum(axis=0), dtype=np.int64).ravel()),
     )

@@ -27,7 +27,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Generic, TypeVar
 
-from common.launcher import die_with_parent
+from common.process import die_with_parent
 from services.planner.budget import limit_memory
 
 log = logging.getLogger(__name__)

@@ -65,6 +65,7 @@ class PlannerService:
             if fut is None:
                 fut = self.pool.submit(compute, req, None, self.cfg.budget, self.allowed)
                 self._inflight[key] = fut
+                self.ctx.log.info("planning %s (%d plots)", fld.name, fld.n_plots)
         t0 = time.monotonic()
         try:
             result = fut.result()

@@ -52,6 +52,9 @@ class SimService:
         layout, fld = load_field(ctx.field)
         ctx.log.info("world: field %s (%s), %d plots", fld.name, ctx.field, fld.n_plots)
         self.world = World(layout, fld, cfg.world)
+        ctx.log.info(
+            "world: %d sphere targets, %s", len(self.world.sphere_centres), self.world.placement
+        )
         self.scan_root = Path(cfg.scan_dir or ctx.run_dir)
         x, y, yaw = cfg.start or (float(fld.origin_xy[0]), float(fld.origin_xy[1]), 0.0)
         self.state = self.world.settle(RobotState(x=x, y=y, yaw=math.radians(yaw)))

@@ -6,8 +6,9 @@ where the robot would scan. Here a pole is a thin vertical cylinder from the gro
 the sphere's underside, and the sphere's centre sits one radius above the pole top.
 The ground-truth centres are what a target-based registration is scored on.
 
-Where the sites are not given they are chosen for the survey's scan locations (the
-default plan of the field, or ``scan_sites``) with the renderer's own 3D ray casting:
+Where the sites are given neither in the manifest nor in the field file, they are
+chosen for the scan locations a survey can use (the field's candidate lane crossings,
+or ``scan_sites``) with the renderer's own 3D ray casting:
 with a 1.9 m canopy and the scanner 1 m up, a sphere is seen only along the open lanes
 through a scan location (over the canopy it would need a pole several metres tall:
 a ray from 1 m must clear 1.9 m at the plot edge 0.4-0.8 m away), and at the paper's
@@ -35,7 +36,7 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from common.field import Field, FieldLayout
+from common.field import Field
 from services.sim.scene import Scene
 from services.sim.terrain import Terrain
 
@@ -53,7 +54,7 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     """Sphere targets (metres, degrees). ``sites``: explicit ``[x, y, pole_height]`` per
     target in the ``field`` frame; ``None`` picks ``count`` sites (pole heights in
     [``pole_min``, ``pole_max``], the paper's 1.4-2 m) for the scan locations
-    ``scan_sites`` (``[x, y]``; ``None``: the field's default plan) as the module
+    ``scan_sites`` (``[x, y]``; ``None``: the field's candidate scan locations) as the module
     docstring describes."""
 
     count: Annotated[int, msgspec.Meta(ge=0, le=50)] = 5
@@ -107,29 +108,6 @@ class Survey:
     origins: F64
     paths: F64
     stops: F64
-
-
-_PLANS: dict[bytes, tuple[F64, F64]] = {}
-
-
-def planned_survey(layout: FieldLayout, field: Field) -> tuple[F64, F64]:
-    """Scan locations (S, 2) and the tour's legs (P, 2, 2) of the field's default plan
-    (what the mission surveys unless given a plan file); cached per field. Raises
-    FieldError (one line) for a field beyond the planner's default budget, which the
-    planner service would refuse too."""
-    key = msgspec.json.encode(layout) + field.cand_xy.tobytes() + field.plot_boxes.tobytes()
-    if key not in _PLANS:
-        # imported here: only a world that places its own spheres needs the planner
-        from services.planner.budget import PlanBudget, check
-        from services.planner.core import plan
-
-        check(field, PlanBudget())
-        pr = plan(layout, field=field)
-        xy = np.array([field.cand_xy[field.candidate_index(c)] for c in pr.selected])
-        legs = np.array([[[g.x0, g.y0], [g.x1, g.y1]] for g in pr.legs], dtype=np.float64)
-        _PLANS[key] = (xy.reshape(-1, 2), legs.reshape(-1, 2, 2))
-    xy, legs = _PLANS[key]
-    return xy.copy(), legs.copy()
 
 
 def drive_network(field: Field) -> F64:

@@ -28,7 +28,6 @@ from services.sim.targets import (
     Targets,
     build_targets,
     drive_network,
-    planned_survey,
 )
 from services.sim.terrain import Terrain, TerrainConfig, build_terrain
 
@@ -122,17 +121,21 @@ class World:
         )
 
     def _place_targets(self, ob_cyls: F64, ob_boxes: F64) -> Targets:
-        """The spheres: given sites, or chosen for the survey's scans (see
-        :mod:`services.sim.targets`) as seen through the plants and obstacles."""
+        """The spheres: the manifest's sites, else chosen for its ``scan_sites``, else the
+        field's (as the surveyor set them out), else chosen by the simulator for the
+        lane crossings a survey can scan from, seen through the plants and obstacles (see
+        :mod:`services.sim.targets`). The robot's own planner is never asked: the
+        world must not move when the product does."""
         tc = self.cfg.targets
+        if self._field_sites:
+            tc = msgspec.structs.replace(tc, sites=[tuple(s) for s in self.layout.targets])
         if tc.sites is not None or tc.count == 0:
             return build_targets(self.field, self.terrain, tc, None, None)
         if tc.scan_sites is not None:
             xy = np.array(tc.scan_sites, dtype=np.float64).reshape(-1, 2)
-            paths = drive_network(self.field)
         else:
-            xy, legs = planned_survey(self.layout, self.field)
-            paths = np.concatenate([legs, drive_network(self.field)])
+            xy = self.field.cand_xy.reshape(-1, 2)
+        paths = drive_network(self.field)
         origins = np.array(
             [
                 self.scanner_pose(self.settle(RobotState(x=float(x), y=float(y), yaw=0.0)))[:3, 3]
@@ -143,6 +146,29 @@ class World:
         bare = Scene(self.terrain, self.foliage, np.zeros((0, 5)), ob_cyls, ob_boxes)
         survey = Survey(origins=origins, paths=paths, stops=stops)
         return build_targets(self.field, self.terrain, tc, bare, survey)
+
+    @property
+    def placement(self) -> str:
+        """How the spheres were placed, for the logs and the world's description."""
+        if self.cfg.targets.sites is not None:
+            return "the manifest's [services.sim.world.targets] sites"
+        if self.cfg.targets.count == 0:
+            return "none"
+        if self.cfg.targets.scan_sites is not None:
+            return "chosen by the simulator for the manifest's scan_sites"
+        if self._field_sites:
+            return "the field file's target sites"
+        return "chosen by the simulator for the field's candidate scan locations"
+
+    @property
+    def _field_sites(self) -> bool:
+        tc = self.cfg.targets
+        return (
+            bool(self.layout.targets)
+            and tc.count > 0
+            and tc.sites is None
+            and tc.scan_sites is None
+        )
 
     @property
     def sphere_centres(self) -> F64:

@@ -158,26 +158,6 @@ def field_of(plan: PlanResult, fields: list[Field]) -> Field | None:
     return None
 
 
-def selected_views(plan: PlanResult, field: Field) -> I64:
-    """For every cell of ``field``, how many of the plan's selected locations see it,
-    under the plan's own visibility options (a few seconds on first use: numba)."""
-    from services.planner.visibility import compute_visibility
-
-    rows = [field.candidate_index(i) for i in plan.selected]
-    sub = dataclasses.replace(
-        field,
-        cand_xy=field.cand_xy[rows],
-        cand_ids=field.cand_ids[rows],
-        cand_row_lane=field.cand_row_lane[rows],
-        cand_cross_lane=field.cand_cross_lane[rows],
-    )
-    o = plan.options
-    vis = compute_visibility(
-        sub, plan.scanner, o.visibility, samples=o.samples, step_deg=o.grid_step_deg
-    )
-    return vis.cell_views(o.min_hits)
-
-
 def cell_entry(field: Field, views: I64) -> Entry:
     c = field.cell_boxes
     colours = VIEW_COLOURS[np.minimum(views, len(VIEW_COLOURS) - 1)]

@@ -22,6 +22,8 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from common import keys
 from common.clock import SimClock
 from common.field import FieldError, build_field, load_field
@@ -221,10 +223,13 @@ class VizService:
         with contextlib.suppress(FieldError):
             candidates.append(load_field(plan.field)[1])
         field = scene.field_of(plan, candidates)
-        if field is None:
+        if field is None or plan.cell_views is None:
             self.log.info("viz: plan %s: field cells not known here, plots only", plan.field)
             return
-        views = scene.selected_views(plan, field)
+        views = np.asarray(plan.cell_views.numpy(), dtype=np.int64)
+        if len(views) != len(field.cell_boxes):
+            self.log.info("viz: plan %s: cells differ from the field's, plots only", plan.field)
+            return
         if plan is self.plan:
             self._set_static([scene.cell_entry(field, views)])
 

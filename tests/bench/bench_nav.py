@@ -30,7 +30,7 @@ def main() -> int:
                 [
                     sys.executable,
                     "-m",
-                    "common.cli",
+                    "phenorover",
                     "--log-level",
                     "warning",
                     "nav-test",

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.mission import MissionPhase, MissionState
 from common.messages.nav import NavState
 from common.messages.sim import TruthPose
@@ -80,7 +80,7 @@ def finish(d: Deployment, mission: str, timeout: float = 600) -> MissionState:
 
 
 def pid_of(d: Deployment, service: str) -> int:
-    return next(a.pid for a in wait_alive(d.session, {service}, 10) if a.service == service)
+    return next(a.pid for a in wait_alive(d.session, {service}, 10).seen if a.service == service)
 
 
 def wait_driving(d: Deployment, scan: int) -> None:
@@ -171,11 +171,11 @@ def power_cut(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
         # the services first: a launcher that dies first sends them SIGTERM, and a
         # power cut lets nobody shut down cleanly
-        for a in wait_alive(d.session, {"mission"}, 10):
+        for a in wait_alive(d.session, {"mission"}, 10).seen:
             os.kill(a.pid, signal.SIGKILL)
         d.up.kill()
         d.up.wait()
-        d.up = procs.start("-m", "common.cli", "up", str(tmp / "m.toml"), log=tmp / "up2.log")
+        d.up = procs.start("-m", "phenorover", "up", str(tmp / "m.toml"), log=tmp / "up2.log")
         final = finish(d, s.mission)
         ok, text, figs = survey_verdict(d, s.mission, truth)
         resumed = "resuming mission" in (tmp / "up2.log").read_text()

@@ -59,7 +59,7 @@ def run_once(field: str, log: Path) -> dict[str, object]:
     with log.open("w") as out:
         code = subprocess.run(
             # python -m from this checkout: its code, whichever checkout is installed
-            [sys.executable, "-m", "common.cli", "sim", "--field", field],
+            [sys.executable, "-m", "phenorover", "sim", "--field", field],
             cwd=REPO,
             stdout=out,
             stderr=subprocess.STDOUT,

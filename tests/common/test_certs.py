@@ -89,7 +89,7 @@ def test_tls_problems_name_a_wrong_machine_a_foreign_ca_and_an_open_key(tmp_path
 
 def cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "common.cli", "certs", *args],
+        [sys.executable, "-m", "phenorover", "certs", *args],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from common.config import ConfigError, apply_overrides, load_manifest
-from common.launcher import validate
+from phenorover.launcher import validate
 from tests.conftest import REPO
 
 DEPLOY = REPO / "deploy"
@@ -91,7 +91,7 @@ def test_service_rejects_bad_override_with_one_line() -> None:
 
 @pytest.mark.parametrize("service", sorted(__import__("services").SERVICES))
 def test_dumped_config_loads_back_unchanged(service: str, tmp_path: Path) -> None:
-    from common.launcher import config_type
+    from phenorover.launcher import config_type
 
     t = config_type(service, service)
     section = load_manifest(DEPLOY / "sim.toml").services.get(service, {})

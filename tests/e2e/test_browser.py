@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.mission import MissionPhase
 from tests.conftest import Procs, free_port
 from tests.e2e.cdp import Browser, find_chromium

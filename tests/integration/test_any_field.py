@@ -90,7 +90,7 @@ register_on_done = false
 {extra}""")
     log = tmp / "sim.log"
     p = procs.start(
-        "-m", "common.cli", "sim", "--manifest", str(manifest), "--field", str(field), log=log
+        "-m", "phenorover", "sim", "--manifest", str(manifest), "--field", str(field), log=log
     )
     code = p.wait(timeout=240)
     return code, log.read_text(), runs

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.base import EStop, Twist
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.transport import Bus

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Generic, TypeVar
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.clock import NS
 from common.keys import Topic
 from common.messages.core import Message

@@ -22,7 +22,7 @@ import pytest
 import zenoh
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.clock import NS
 from common.config import zenoh_config
 from common.messages.base import LaserScan, Odometry

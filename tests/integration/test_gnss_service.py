@@ -12,26 +12,20 @@ from pathlib import Path
 import numpy as np
 
 from common import keys
-from common.cli import wait_alive
-from common.messages.gnss import FixType, GnssHeading, NavSatFix
+from common.client import wait_alive
+from common.messages.gnss import FixType
 from common.messages.sim import SimAntennas
 from common.transport import Bus
 from services.gnss.nmea import Gga
 from services.gnss.nmea_format import format_gga
-from tests.conftest import Procs
-
-
-def collect(bus: Bus, topic: keys.Topic, out: list) -> None:
-    bus.subscribe(topic, out.append)
+from tests.conftest import Procs, record
 
 
 def test_sim_receivers_give_fixes_and_a_heading_near_truth(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
-    headings: list[GnssHeading] = []
-    fixes: list[NavSatFix] = []
-    collect(client_bus, keys.GNSS_HEADING, headings)
-    collect(client_bus, keys.GNSS_FIX.at(antenna=1), fixes)
+    headings = record(client_bus, keys.GNSS_HEADING)
+    fixes = record(client_bus, keys.GNSS_FIX.at(antenna=1))
     procs.service(
         "services.gnss",
         router_endpoint,
@@ -45,12 +39,10 @@ def test_sim_receivers_give_fixes_and_a_heading_near_truth(
     c, s = math.cos(yaw), math.sin(yaw)
     p1 = (10.0 - 0.475 * c, 5.0 - 0.475 * s, 1.10)
     p2 = (10.0 + 0.475 * c, 5.0 + 0.475 * s, 1.10)
-    for k in range(300):
+    for k in range(300):  # a truth stream at 200 Hz: pacing the input, not synchronising
         pub.put(SimAntennas(stamp_ns=k * 100_000_000, p1=p1, p2=p2))
         time.sleep(0.005)
-    deadline = time.monotonic() + 10
-    while len(headings) < 250 and time.monotonic() < deadline:
-        time.sleep(0.1)
+    headings.until(lambda hs: len(hs) >= 250, timeout=10)
     valid = [h for h in headings if h.valid]
     assert len(valid) > 200, (len(headings), len(valid))
     err = np.degrees([(h.yaw - yaw + math.pi) % (2 * math.pi) - math.pi for h in valid])
@@ -91,8 +83,7 @@ def test_tcp_receiver_survives_corrupt_sentences(
 
     th = threading.Thread(target=serve, daemon=True)
     th.start()
-    fixes: list[NavSatFix] = []
-    collect(client_bus, keys.GNSS_FIX.at(antenna=1), fixes)
+    fixes = record(client_bus, keys.GNSS_FIX.at(antenna=1))
     health = client_bus.latest(keys.HEALTH.at(service="gnss"))
     procs.service(
         "services.gnss",
@@ -108,10 +99,8 @@ def test_tcp_receiver_survives_corrupt_sentences(
     try:
         h = health.wait_for(lambda h: h.decode_errors >= 8, timeout=20)
         assert h is not None, "corrupt sentences were not counted"
-        deadline = time.monotonic() + 10
-        while not fixes and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert fixes and abs(fixes[-1].latitude - 33.717) < 1e-6
+        assert fixes.until(bool, timeout=10)
+        assert abs(fixes[-1].latitude - 33.717) < 1e-6
         warnings = [
             ln
             for ln in (tmp_path / "gnss.log").read_text().splitlines()

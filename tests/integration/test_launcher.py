@@ -12,7 +12,7 @@ from pathlib import Path
 
 import zenoh
 
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.config import zenoh_config
 from tests.conftest import REPO, Procs, free_port, pid_alive
 
@@ -38,10 +38,10 @@ def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: 
     port = free_port()
     manifest = write_manifest(tmp_path, port)
     log = tmp_path / "up.log"
-    up = procs.start("-m", "common.cli", "up", str(manifest), log=log)
+    up = procs.start("-m", "phenorover", "up", str(manifest), log=log)
     session = zenoh.open(zenoh_config("client", [], [f"tcp/127.0.0.1:{port}"]))
     try:
-        seen = wait_alive(session, {"sim", "gnss"}, timeout=30)
+        seen = wait_alive(session, {"sim", "gnss"}, timeout=30).seen
         assert {a.service for a in seen} >= {"sim", "gnss"}
         assert all(a.machine == "testbox" for a in seen)
         gnss_pid = next(a.pid for a in seen if a.service == "gnss")
@@ -51,12 +51,12 @@ def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: 
         new_pid = None
         while new_pid is None:
             assert time.monotonic() < deadline, "killed service was not restarted"
-            for a in wait_alive(session, {"gnss"}, timeout=2):
+            for a in wait_alive(session, {"gnss"}, timeout=2).seen:
                 if a.service == "gnss" and a.pid != gnss_pid:
                     new_pid = a.pid
         all_pids.add(new_pid)
         status = subprocess.run(
-            [sys.executable, "-m", "common.cli", "status", "--connect", f"tcp/127.0.0.1:{port}"],
+            [sys.executable, "-m", "phenorover", "status", "--connect", f"tcp/127.0.0.1:{port}"],
             cwd=REPO,
             capture_output=True,
             text=True,
@@ -80,7 +80,7 @@ def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: 
 def test_manifest_typo_is_one_clear_error_before_anything_starts(tmp_path: Path) -> None:
     manifest = write_manifest(tmp_path, free_port(), extra="bakend = 'sim'\n")
     r = subprocess.run(
-        [sys.executable, "-m", "common.cli", "up", str(manifest)],
+        [sys.executable, "-m", "phenorover", "up", str(manifest)],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -95,7 +95,7 @@ def test_manifest_typo_is_one_clear_error_before_anything_starts(tmp_path: Path)
 def test_unknown_service_in_manifest(tmp_path: Path) -> None:
     manifest = write_manifest(tmp_path, free_port(), extra="[services.gnsss]\n")
     r = subprocess.run(
-        [sys.executable, "-m", "common.cli", "up", str(manifest)],
+        [sys.executable, "-m", "phenorover", "up", str(manifest)],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -107,7 +107,7 @@ def test_unknown_service_in_manifest(tmp_path: Path) -> None:
 
 def run_cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "common.cli", *args],
+        [sys.executable, "-m", "phenorover", *args],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -184,7 +184,7 @@ def test_commands_that_cannot_reach_their_deployment_say_where_in_one_line() -> 
     }
     runs = {
         name: subprocess.Popen(
-            [sys.executable, "-m", "common.cli", *args],
+            [sys.executable, "-m", "phenorover", *args],
             cwd=REPO,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,

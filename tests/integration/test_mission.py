@@ -18,14 +18,14 @@ import pytest
 import zenoh
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.config import zenoh_config
 from common.messages.mission import MissionPhase, MissionStart, MissionState
 from common.messages.nav import NavState
 from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
 from services.mission.log import MissionLog
-from tests.conftest import REPO, Procs, free_port
+from tests.conftest import REPO, Procs, free_port, record
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
 SERVICES = {"sim", "gnss", "base", "scanner", "nav", "planner", "mission"}
@@ -87,7 +87,7 @@ settle_s = 1.0
 {lease}
 {extra}""")
         self.log = tmp / "up.log"
-        self.up = procs.start("-m", "common.cli", "up", str(manifest), log=self.log, wrap=wrap)
+        self.up = procs.start("-m", "phenorover", "up", str(manifest), log=self.log, wrap=wrap)
         self.session = zenoh.open(zenoh_config("client", [], [f"tcp/{host}:{self.port}"]))
         self.bus = Bus(self.session, "test")
         assert wait_alive(self.session, SERVICES, timeout=60), "deployment did not come up"
@@ -151,11 +151,13 @@ def test_complete_mission_with_pause_and_resume_from_another_process(
     s = d.start()
     assert s.scans_total == 3
     d.wait(lambda x: x.mission == s.mission and x.phase == MissionPhase.SCANNING)
-    cli = [sys.executable, "-m", "common.cli", "mission", "--connect", f"tcp/127.0.0.1:{d.port}"]
+    cli = [sys.executable, "-m", "phenorover", "mission", "--connect", f"tcp/127.0.0.1:{d.port}"]
     r = subprocess.run([*cli, "pause"], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "paused" in r.stdout, r.stderr
     held = d.wait(lambda x: x.phase == MissionPhase.PAUSED)
-    time.sleep(3.0)  # 60 s of sim time at 20x: a running mission would have moved on
+    # a minute of sim time: a running mission would have moved on
+    clock = record(d.bus, keys.SIM_CLOCK)
+    assert clock.until(lambda cs: bool(cs) and cs[-1].sim_ns > held.stamp_ns + 60 * 10**9, 30)
     now = d.state.get()
     assert now is not None and now.phase == MissionPhase.PAUSED
     # distance is measured: standing, it grows by the estimate's noise only
@@ -188,7 +190,7 @@ def test_mission_killed_mid_scan_resumes_without_duplicate_or_gap(
     d = deployment
     s = d.start()
     d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
-    pid = next(a.pid for a in wait_alive(d.session, {"mission"}, 10) if a.service == "mission")
+    pid = next(a.pid for a in wait_alive(d.session, {"mission"}, 10).seen if a.service == "mission")
     os.kill(pid, signal.SIGKILL)  # the launcher restarts it; it must pick up where it was
     final = d.wait(
         lambda x: x.mission == s.mission and x.phase == MissionPhase.DONE and x.scans_done == 3
@@ -248,7 +250,7 @@ def test_a_service_killed_mid_survey_is_restarted_and_the_survey_completes(
         assert progress.wait_for(
             lambda p: f".{2}." in p.route_id and p.state == NavState.DRIVING, timeout=60
         )
-    pid = next(a.pid for a in wait_alive(d.session, {service}, 10) if a.service == service)
+    pid = next(a.pid for a in wait_alive(d.session, {service}, 10).seen if a.service == service)
     os.kill(pid, signal.SIGKILL)
     final = d.wait(lambda x: x.mission == s.mission and x.phase == MissionPhase.DONE)
     assert final.scans_done == 3 and final.scans_failed == 0, final

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.nav import LEASE_ENDED, FollowRoute, Leg, NavState
 from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError

@@ -11,7 +11,7 @@ import msgspec
 import pytest
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.system import Health
 from common.service import STOP_DEADLINE_S
 from common.status import query_alive
@@ -82,7 +82,7 @@ def test_liveliness_seen_and_lost_when_killed(
     procs: Procs, router_endpoint: str, client_bus: Bus
 ) -> None:
     p = procs.service(PROBE, router_endpoint)
-    seen = wait_alive(client_bus.session, {"probe"}, timeout=20)
+    seen = wait_alive(client_bus.session, {"probe"}, timeout=20).seen
     assert [a.pid for a in seen if a.service == "probe"] == [p.pid]
     p.send_signal(signal.SIGKILL)
     p.wait()

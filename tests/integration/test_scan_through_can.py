@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.scan import ScannerState
 from common.transport import Bus
 from services.sim.render import read_e57

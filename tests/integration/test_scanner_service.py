@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.scan import ScannerState, ScanProfile, StartScan
 from common.messages.sim import RenderReply, RenderRequest
 from common.transport import Bus, RpcError

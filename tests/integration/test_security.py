@@ -25,10 +25,10 @@ from common.acl import (
 )
 from common.certs import issue_files
 from common.config import AccessConfig, TlsConfig, zenoh_config
-from common.launcher import router_config
 from common.messages.mission import MissionEvent
-from common.preflight import validate
 from common.transport import Bus
+from phenorover.launcher import router_config
+from phenorover.preflight import validate
 from tests.conftest import REPO, Procs, free_port, record
 from tests.integration.test_tls import make_certs
 
@@ -205,7 +205,7 @@ def test_the_launcher_enforces_and_logs_denials(tmp_path: Path, procs: Procs) ->
     remote, local = free_port(), free_port()
     manifest = robot_manifest(tmp_path, tls["robot"], remote, local)
     err = tmp_path / "up.log"
-    up = procs.start("-m", "common.cli", "up", str(manifest), log=err)
+    up = procs.start("-m", "phenorover", "up", str(manifest), log=err)
     robot = Robot(f"tcp/127.0.0.1:{local}")  # waits for the launcher's router
     try:
         with zenoh.open(
@@ -285,7 +285,7 @@ def test_up_check_says_what_tls_would_use_and_finds_a_stranger_certificate(
     tls = make_certs(tmp_path)
     m = robot_manifest(tmp_path, tls["jetson"], free_port(), free_port())  # wrong machine
     r = subprocess.run(
-        [sys.executable, "-m", "common.cli", "up", "--check", str(m)],
+        [sys.executable, "-m", "phenorover", "up", "--check", str(m)],
         cwd=REPO,
         capture_output=True,
         text=True,

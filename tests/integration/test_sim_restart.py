@@ -14,7 +14,7 @@ import msgspec
 import pytest
 
 from common import keys
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.clock import NS
 from common.messages.sim import SimClock, SimWheelCommand, TruthPose
 from common.transport import Bus

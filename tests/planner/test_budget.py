@@ -12,7 +12,6 @@ import msgspec
 import numpy as np
 import pytest
 
-from common.cli import main
 from common.field import (
     FIELDS_DIR,
     MAX_PLOTS,
@@ -23,6 +22,7 @@ from common.field import (
     load_field,
 )
 from common.field_geojson import field_from_geojson
+from phenorover.cli import main
 from services.planner.budget import OverBudget, PlanBudget, check
 from services.planner.request import confine
 

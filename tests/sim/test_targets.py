@@ -1,6 +1,9 @@
-"""Sphere placement: chosen for the planned scans by 3D visibility, off the robot's
-paths, and the visibility estimate agrees with the renderer."""
+"""Sphere placement: the field file's sites serve the planned scans and stay off the
+robot's paths; without sites they are chosen by 3D visibility, and the visibility
+estimate agrees with the renderer. The planner is asked here, by the test, never by
+the simulator."""
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -13,10 +16,19 @@ from services.sim.targets import (
     _segment_distance,
     drive_network,
     expected_points,
-    planned_survey,
     select,
 )
 from services.sim.world import World, WorldConfig
+
+
+def planned_survey(layout, field):
+    """Scan locations (S, 2) and the tour's legs (P, 2, 2) of the field's default plan."""
+    from services.planner.core import plan
+
+    pr = plan(layout, field=field)
+    xy = np.array([field.cand_xy[field.candidate_index(c)] for c in pr.selected])
+    legs = np.array([[[g.x0, g.y0], [g.x1, g.y1]] for g in pr.legs], dtype=np.float64)
+    return xy.reshape(-1, 2), legs.reshape(-1, 2, 2)
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +44,14 @@ def _origins(world, xy):
             for x, y in xy
         ]
     )
+
+
+def test_engr_spheres_stand_at_the_field_files_sites(engr):
+    assert engr.placement == "the field file's target sites"
+    want = np.array(engr.layout.targets)
+    np.testing.assert_allclose(engr.sphere_centres[:, :2], want[:, :2])
+    top = engr.targets.poles[:, 3] - engr.terrain.height(*engr.sphere_centres[:, :2].T)
+    np.testing.assert_allclose(top, want[:, 2], atol=1e-9)
 
 
 def test_engr_spheres_serve_the_planned_scans_and_stay_off_the_paths(engr):
@@ -96,3 +116,13 @@ def test_select_prefers_two_spheres_per_scan_and_keeps_them_apart():
     chosen = select(pts, xy, 2, 10.0, 3.0)
     assert sorted(chosen) in ([1, 2], [2, 3])
     assert select(pts, xy, 0, 10.0, 3.0) == []
+
+
+def test_a_field_without_sites_gets_spheres_chosen_for_its_lane_crossings():
+    layout, field = load_field("spl")
+    bare = msgspec.structs.replace(layout, targets=())
+    w = World(bare, field)
+    assert w.placement.startswith("chosen by the simulator")
+    assert w.sphere_centres.shape == (5, 3)
+    pts = expected_points(w.scene, _origins(w, field.cand_xy), w.sphere_centres, w.cfg.targets)
+    assert ((pts >= w.cfg.targets.min_points).sum(axis=1) >= 2).sum() >= 3

@@ -7,7 +7,7 @@ from __future__ import annotations
 import signal
 from pathlib import Path
 
-from common.cli import wait_alive
+from common.client import wait_alive
 from common.messages.mission import MissionPhase
 from tests.conftest import Procs
 from tests.integration.test_mission import SERVICES, Deployment

@@ -52,7 +52,8 @@ def test_plan_entries_draw_every_plot_candidate_and_leg(tiny_plan: PlanResult) -
 def test_cells_are_counted_by_the_selected_scans_that_see_them(tiny_plan: PlanResult) -> None:
     field = scene.field_of(tiny_plan, [build_field(tiny_plan.layout)])
     assert field is not None
-    views = scene.selected_views(tiny_plan, field)
+    assert tiny_plan.cell_views is not None
+    views = np.asarray(tiny_plan.cell_views.numpy())
     assert views.shape == (field.n_cells,)
     assert views.max() <= len(tiny_plan.selected)
     # the plan covers its target with exactly these locations: same count of seen cells

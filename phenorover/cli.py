@@ -10,104 +10,30 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import zenoh
-
-from common.config import ConfigError, load_manifest, zenoh_config
+from common.client import (
+    DEFAULT_MANIFEST,
+    connect_or_explain,
+    open_client,
+    wait_alive,
+)
+from common.config import ConfigError
 from common.service import setup_logging
-from common.status import Alive, format_table, query_alive
-
-REPO = Path(__file__).resolve().parent.parent
-DEFAULT_MANIFEST = REPO / "deploy" / "sim.toml"
+from common.status import format_table, query_alive
 
 log = logging.getLogger("phenorover")
-
-
-# how long a command waits for its machine's router: it is local, so it is either
-# there or not (a router just started by `phenorover up` is listening within this)
-CONNECT_TIMEOUT_S = 3.0
-
-
-class Unreachable(ConnectionError):
-    """No router answered at the endpoints; the message names them, on one line."""
-
-
-def client_endpoints(manifest: Path | None, connect: list[str]) -> list[str]:
-    """``--connect`` if given, else where the manifest's machine reaches its router."""
-    if connect:
-        return connect
-    return load_manifest(manifest or DEFAULT_MANIFEST).zenoh.local_endpoints()
-
-
-def open_client(
-    manifest: Path | None, connect: list[str], timeout_s: float = CONNECT_TIMEOUT_S
-) -> zenoh.Session:
-    """A client session to a machine's router: the CLI's way onto the network.
-
-    Raises Unreachable when no router accepts within ``timeout_s`` (a Zenoh client
-    opens only once it has a router: an open session always has one) and ConfigError
-    for a bad manifest."""
-    connect = client_endpoints(manifest, connect)
-    zenoh.init_log_from_env_or("error")
-    try:
-        return zenoh.open(zenoh_config("client", [], connect, client_timeout_s=timeout_s))
-    except zenoh.ZError:
-        where = ", ".join(connect)
-        raise Unreachable(
-            f"no router at {where} within {timeout_s:g} s (is `phenorover up` running "
-            "on this machine?)"
-        ) from None
-
-
-def connect_or_explain(
-    prog: str, manifest: Path | None, connect: list[str], service: str | None = None
-) -> zenoh.Session | None:
-    """open_client for a command: None after printing one line to stderr when the
-    deployment cannot be reached, the manifest is wrong, or (with ``service``) no such
-    service is alive behind the router, e.g. the robot is off or its link down (the
-    caller exits 2). Without that check a call would wait for its full timeout."""
-    try:
-        session = open_client(manifest, connect)
-    except (Unreachable, ConfigError) as exc:
-        print(f"{prog}: {exc}", file=sys.stderr)
-        return None
-    if service is None or any(a.service == service for a in query_alive(session, 2.0)):
-        return session
-    session.close()
-    where = ", ".join(client_endpoints(manifest, connect))
-    print(
-        f"{prog}: no {service} service alive behind {where} (the router is up: is the "
-        f"machine running {service} on and linked?)",
-        file=sys.stderr,
-    )
-    return None
-
-
-def wait_alive(
-    session: zenoh.Session, services: set[str], timeout: float, machine: str | None = None
-) -> list[Alive]:
-    """Poll liveliness until every name in ``services`` is alive; returns what was seen."""
-    deadline = time.monotonic() + timeout
-    seen: list[Alive] = []
-    while time.monotonic() < deadline:
-        seen = query_alive(session, timeout=1.0)
-        names = {a.service for a in seen if machine is None or a.machine == machine}
-        if services <= names:
-            return seen
-        time.sleep(0.2)
-    return seen
 
 
 def cmd_up(args: argparse.Namespace) -> int:
     if args.check:
         return cmd_check(args.manifest)
-    from common.launcher import up
+    from phenorover.launcher import up
 
     return up(args.manifest)
 
 
 def cmd_check(manifest: Path) -> int:
     """``up --check``: what each service would open; exit 2 with a line per problem."""
-    from common.preflight import check
+    from phenorover.preflight import check
 
     try:
         report, problems = check(manifest)
@@ -166,8 +92,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     (each named with the reason), 2 on a bad manifest or field."""
     from common.config import decode_section
     from common.field import FieldError, load_field
-    from common.launcher import Launcher
     from common.transport import Bus
+    from phenorover.launcher import Launcher
     from services.mission.cli import describe, run_survey
     from services.planner.budget import check
     from services.planner.config import PlannerConfig
@@ -192,11 +118,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     wanted = set(launcher.manifest.services)
     t0 = time.monotonic()
     with launcher, open_client(args.manifest, []) as session:
-        seen = wait_alive(session, wanted, timeout=args.timeout)
-        missing = wanted - {a.service for a in seen}
-        print(format_table(seen), flush=True)
-        if missing:
-            print(f"phenorover sim: not alive after {args.timeout:g} s: {sorted(missing)}")
+        alive = wait_alive(session, wanted, timeout=args.timeout)
+        print(format_table(alive.seen), flush=True)
+        if not alive:
+            print(f"phenorover sim: not alive after {args.timeout:g} s: {sorted(alive.missing)}")
             return 1
         print(f"all {len(wanted)} services alive after {time.monotonic() - t0:.1f} s")
         if args.alive_only:

@@ -5,7 +5,7 @@ process (``python -m services.<name> --manifest M``), prefixes their output with
 service name, restarts a service that dies (exponential backoff, logged), and on
 stop sends SIGTERM to all and SIGKILL to whatever is left after ``grace_s``.
 
-Everything is checked before anything starts (:mod:`common.preflight`):
+Everything is checked before anything starts (:mod:`phenorover.preflight`):
 a manifest that names a missing field or mistyped key is one error line, never a
 service restarted in a loop. With ``[zenoh.access]`` the router enforces access control
 (:mod:`common.acl`) and the denials it logs come out as ``phenorover.acl`` warnings.
@@ -13,12 +13,10 @@ service restarted in a loop. With ``[zenoh.access]`` the router enforces access 
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import logging
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -30,8 +28,9 @@ import zenoh
 
 from common.acl import LOG_TARGET, DenialLog, router_acl
 from common.config import ConfigError, Manifest, zenoh_config
-from common.preflight import check_field, validate
-from common.preflight import config_type as config_type  # re-exported: tests, tools
+from common.process import die_with_parent
+from phenorover.preflight import check_field, validate
+from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
 
 log = logging.getLogger("phenorover.up")
 acl_log = logging.getLogger("phenorover.acl")
@@ -40,30 +39,11 @@ acl_log = logging.getLogger("phenorover.acl")
 # denied alike; :class:`DenialLog` keeps the denials
 ACL_LOG_FILTER = f"error,{LOG_TARGET}=trace"
 
-_PR_SET_PDEATHSIG = 1
-
-
-def free_loopback_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now (for a private
-    deployment beside a running one: experiments, tests)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port: int = s.getsockname()[1]
-        return port
-
-
 def router_config(manifest: Manifest) -> zenoh.Config:
     """This machine's router: its endpoints, TLS and access control from the manifest."""
     zs = manifest.zenoh
     acl = router_acl(zs.access) if zs.access is not None else None
     return zenoh_config("router", zs.listen, zs.connect, zs.tls, access_control=acl)
-
-
-def die_with_parent() -> None:
-    """In a child process: get SIGTERM when the parent dies, so a SIGKILLed parent
-    leaves no orphans (Linux prctl PR_SET_PDEATHSIG)."""
-    libc = ctypes.CDLL("libc.so.6", use_errno=True)
-    libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 class StdoutFilter:

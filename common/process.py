@@ -1,0 +1,26 @@
+"""Process helpers a service may need: a free port for a private deployment, and
+children that die with their parent."""
+
+from __future__ import annotations
+
+import ctypes
+import signal
+import socket
+
+_PR_SET_PDEATHSIG = 1
+
+
+def free_loopback_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on right now (for a private
+    deployment beside a running one: experiments, tests)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def die_with_parent() -> None:
+    """In a child process: get SIGTERM when the parent dies, so a SIGKILLed parent
+    leaves no orphans (Linux prctl PR_SET_PDEATHSIG)."""
+    libc = ctypes.CDLL("libc.so.6", use_errno=True)
+    libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)

@@ -1,0 +1,5 @@
+import sys
+
+from phenorover.cli import main
+
+sys.exit(main())
