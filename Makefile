@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 export MPLBACKEND := Agg
 
-.PHONY: test lint typecheck pytest sim bench faults soak e2e venv clean
+.PHONY: test lint typecheck pytest sim bench results faults soak e2e venv clean
 
 venv: $(STAMP)
 
@@ -37,6 +37,12 @@ bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[bench]' || echo "open3d not installable here: Embree comparison skipped"
 	$(BIN)/python -c "import open3d" 2>/dev/null || echo "open3d does not load (Debian: apt-get install libusb-1.0-0): Embree comparison skipped"
 	$(BIN)/python tests/bench/run_all.py
+
+# docs/results.md from the benchmarks' JSON (runs/bench/*.json, written by `make bench`):
+# a table per benchmark with the error models beside it; a missing JSON is said to be.
+# Runs no benchmark.
+results: $(STAMP)
+	$(BIN)/python -m phenorover.eval.render_results
 
 # The fault campaign: each service killed and each injected fault during a survey of
 # the tiny field, judged by the simulator's truth; writes runs/bench/faults.json and

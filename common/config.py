@@ -10,6 +10,7 @@ forbids unknown fields, so a typo is one clear error before anything starts::
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -81,10 +82,13 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     name such as ``engr`` or a field file): its georeference defines the ``field``
     frame for every service. No example is assumed: empty (the default) means none,
     and the launcher refuses a manifest whose services need one, so a robot never
-    surveys an example field by accident."""
+    surveys an example field by accident. ``robot`` is the robot description
+    (:mod:`common.robot`): a file, or the name of a shipped one; empty (the default)
+    is the shipped Husky A200, ``common/robots/husky.toml``."""
 
     machine: str
     field: str = ""
+    robot: str = ""
     clock: Literal["wall", "sim"] = "wall"
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
     # service name -> its config section, decoded by the service's own Config type
@@ -92,8 +96,46 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     run_dir: str = "runs"
 
 
-def _one_line(exc: Exception) -> str:
-    return " ".join(str(exc).split())
+# Keys that left the service sections for the robot description (common/robot.py):
+# (where in the section, as msgspec names it, key) -> where they are now. A manifest
+# that still sets one is told so rather than only that the key is unknown.
+MOVED_TO_ROBOT: dict[tuple[str, str], str] = {
+    ("$", "antenna_levers"): "[[antennas]] x, y",
+    ("$", "antenna_height_m"): "[[antennas]] z",
+    ("$", "lidar_xy"): "[lidar]",
+    ("$", "robot_front_m"): "[footprint] length",
+    ("$", "max_speed"): "[limits] max_speed",
+    ("$", "max_turn_rate"): "[limits] max_turn_rate",
+    ("$", "placement"): "[scanner] and [[antennas]]",
+    ("$.compass", "antenna1_xyz_m"): "[[antennas]]",
+    ("$.compass", "antenna2_xyz_m"): "[[antennas]]",
+    ("$.world", "scanner_mount"): "[scanner]",
+    ("$.world.lidar", "mount_xyz"): "[lidar]",
+    ("$.world.lidar", "mount_yaw_deg"): "[lidar] yaw_deg",
+    ("$.world.robot", "length"): "[footprint]",
+    ("$.world.robot", "width"): "[footprint]",
+    ("$.world.robot", "track"): "track",
+    ("$.world.robot", "wheelbase"): "wheelbase",
+    ("$.world.robot", "max_v"): "[limits] max_speed",
+    ("$.world.robot", "max_w"): "[limits] max_turn_rate",
+    ("$.world.robot", "max_accel"): "[limits] max_accel",
+    ("$.world.robot", "max_alpha"): "[limits] max_turn_accel",
+}
+_UNKNOWN = re.compile(r"Object contains unknown field `(\w+)`(?: - at `([^`]+)`)?")
+
+
+def one_line(exc: Exception) -> str:
+    """``exc``'s message on one line; for a key that moved to the robot description,
+    where it went."""
+    text = " ".join(str(exc).split())
+    m = _UNKNOWN.fullmatch(text)
+    moved = m and MOVED_TO_ROBOT.get((m.group(2) or "$", m.group(1)))
+    if moved:
+        text += (
+            f": it moved to the robot description ({moved} in the file the manifest's "
+            "`robot` names, common/robots/husky.toml by default)"
+        )
+    return text
 
 
 def read_toml(path: Path) -> dict[str, Any]:
@@ -103,7 +145,7 @@ def read_toml(path: Path) -> dict[str, Any]:
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {_one_line(exc)}") from None
+        raise ConfigError(f"{path}: not valid TOML: {one_line(exc)}") from None
 
 
 def load_manifest(path: str | Path) -> Manifest:
@@ -111,7 +153,7 @@ def load_manifest(path: str | Path) -> Manifest:
     try:
         return msgspec.convert(read_toml(p), type=Manifest)
     except msgspec.ValidationError as exc:
-        raise ConfigError(f"{p}: {_one_line(exc)}") from None
+        raise ConfigError(f"{p}: {one_line(exc)}") from None
 
 
 def decode_section(section: dict[str, Any], type_: type[C], where: str) -> C:
@@ -119,7 +161,7 @@ def decode_section(section: dict[str, Any], type_: type[C], where: str) -> C:
     try:
         return msgspec.convert(section, type=type_)
     except msgspec.ValidationError as exc:
-        raise ConfigError(f"{where}: {_one_line(exc)}") from None
+        raise ConfigError(f"{where}: {one_line(exc)}") from None
 
 
 def _parse_value(text: str) -> Any:

@@ -106,11 +106,18 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
         return self.origin_lat is not None and self.origin_lon is not None
 
 
+def _default_scanner_height() -> float:
+    # imported here: the robot description imports this module for ScannerModel
+    from common.robot import default_robot
+
+    return default_robot().scanner.z
+
+
 class ScannerModel(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A terrestrial laser scanner: angles in degrees (vertical 0 = horizontal, up
     positive; horizontal counter-clockwise from the field +x axis), ranges and the
     optical-centre height above ground in metres. Defaults: FARO Focus S70 as the
-    paper uses it."""
+    paper uses it, at the shipped robot's scanner height."""
 
     vertical_start_deg: Annotated[float, msgspec.Meta(ge=-90, le=90)] = -60.0
     vertical_end_deg: Annotated[float, msgspec.Meta(ge=-90, le=90)] = 90.0
@@ -119,10 +126,9 @@ class ScannerModel(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=45)] = 0.36
     min_range: NonNeg = 0.6
     max_range: Pos = 70.0
-    # The paper leaves the optical-centre height unstated, saying only that it is low
-    # next to the 1.9 m plants (Husky deck 0.39 m plus mount); 1.0 m is our assumption,
-    # and PAPER_NOTES found 0.8-1.5 m changes no location count.
-    height: Pos = 1.0
+    # the robot description's scanner height (common.robot.scanner_model); by default
+    # the shipped robot's
+    height: Pos = msgspec.field(default_factory=_default_scanner_height)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -39,6 +39,7 @@ from common.config import (
 )
 from common.field import FieldError
 from common.messages.system import Health, Pong
+from common.robot import Robot, default_robot, load_robot
 from common.transport import Bus
 
 C = TypeVar("C", bound=msgspec.Struct)
@@ -69,7 +70,9 @@ class CliOptions(Protocol):
 
 @dataclasses.dataclass
 class Context:
-    """What a service gets from the runner."""
+    """What a service gets from the runner. ``robot``: the deployment's robot
+    description (the manifest's ``robot``), where every service finds the robot's
+    geometry and limits."""
 
     name: str
     machine: str
@@ -78,6 +81,10 @@ class Context:
     log: logging.Logger
     run_dir: Path
     field: str = "engr"
+    robot: Robot = dataclasses.field(default_factory=default_robot)
+    # the deployment manifest the service was started with (None: none), for the
+    # child processes it starts, which read their own sections of it
+    manifest: Path | None = None
 
 
 def setup_logging(level: str) -> None:
@@ -101,6 +108,7 @@ def _parser(name: str) -> argparse.ArgumentParser:
     p.add_argument("--machine", default=None)
     p.add_argument("--clock", choices=["wall", "sim"], default=None)
     p.add_argument("--field", default=None, help="field surveyed (example name or file)")
+    p.add_argument("--robot", default=None, help="robot description (shipped name or file)")
     p.add_argument("--log-level", default=os.environ.get("PHENOROVER_LOG", "info"))
     return p
 
@@ -137,6 +145,8 @@ def main(
         if options is not None:
             args.set = [*args.set, *options.overrides(args)]
         cfg, manifest = resolve_config(name, config_type, args)
+        # read before anything starts: a bad description is one line, not a traceback
+        robot = load_robot(args.robot or (manifest.robot if manifest else ""))
     except ConfigError as exc:
         print(f"{name}: config error: {exc}", file=sys.stderr)
         return EXIT_CONFIG
@@ -179,7 +189,9 @@ def main(
     run_dir = Path(manifest.run_dir if manifest else "runs")
     # no example field by default: a service that needs one and was given none fails
     field = args.field or (manifest.field if manifest else "")
-    ctx = Context(name, machine, bus, clock, logging.getLogger(name), run_dir, field)
+    ctx = Context(
+        name, machine, bus, clock, logging.getLogger(name), run_dir, field, robot, args.manifest
+    )
     bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text))
     health = threading.Thread(
         target=_heartbeat, args=(bus, name, machine, since_ns, stop), daemon=True

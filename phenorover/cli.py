@@ -114,8 +114,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(f"phenorover sim: {exc}", file=sys.stderr)
         return 2
     if args.field:
-        launcher.extra_args = {name: ["--field", field] for name in launcher.manifest.services}
-    wanted = set(launcher.manifest.services)
+        launcher.extra_args = {name: ["--field", field] for name in launcher.children}
+    wanted = set(launcher.children)
     t0 = time.monotonic()
     with launcher, open_client(args.manifest, []) as session:
         alive = wait_alive(session, wanted, timeout=args.timeout)
@@ -131,7 +131,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         try:
             final = run_survey(bus, field, args.survey_timeout, problems)
             if final is not None:
-                from services.register.hook import wait_registration
+                from services.mission.registration import wait_registration
 
                 final = wait_registration(bus, final, args.register_timeout)
         finally:
@@ -205,7 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_arguments(s)
     s.set_defaults(func=cmd_plan)
 
-    from services.nav import navtest
+    from phenorover.eval import navtest
 
     s = sub.add_parser("nav-test", help="run one of the paper's navigation experiments")
     navtest.add_arguments(s)
@@ -223,6 +223,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     s = sub.add_parser("register", help="register a mission's scans and write its report")
     add_register_arguments(s)
     s.set_defaults(func=cmd_register)
+
+    from phenorover.eval.register import cli as eval_register
+
+    s = sub.add_parser("eval", help="score a simulated run against the simulator's truth")
+    evals = s.add_subparsers(dest="what", required=True)
+    e = evals.add_parser("register", help="score a registration against the true poses")
+    eval_register.add_arguments(e)
+    e.set_defaults(func=eval_register.run)
 
     args = p.parse_args(argv)
     setup_logging(args.log_level)

@@ -29,8 +29,9 @@ import zenoh
 from common.acl import LOG_TARGET, DenialLog, router_acl
 from common.config import ConfigError, Manifest, zenoh_config
 from common.process import die_with_parent
-from phenorover.preflight import check_field, validate
+from phenorover.preflight import check_field, check_robot, validate
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
+from services import SERVICES
 
 log = logging.getLogger("phenorover.up")
 acl_log = logging.getLogger("phenorover.acl")
@@ -38,6 +39,7 @@ acl_log = logging.getLogger("phenorover.acl")
 # the router's access-control verdicts: Zenoh logs them at trace level, allowed and
 # denied alike; :class:`DenialLog` keeps the denials
 ACL_LOG_FILTER = f"error,{LOG_TARGET}=trace"
+
 
 def router_config(manifest: Manifest) -> zenoh.Config:
     """This machine's router: its endpoints, TLS and access control from the manifest."""
@@ -96,10 +98,12 @@ class Launcher:
         self.path = manifest_path
         self.manifest = validate(manifest_path)
         check_field(self.manifest, manifest_path)
+        check_robot(self.manifest, manifest_path)
         self.out = out or sys.stdout
         self.extra_args = extra_args or {}
         self.grace_s = grace_s
-        self.children = {name: Child(name) for name in self.manifest.services}
+        # jobs (``services.JOBS``, e.g. register) are configured here but run on demand
+        self.children = {name: Child(name) for name in self.manifest.services if name in SERVICES}
         self._stopping = threading.Event()
         self._out_lock = threading.Lock()
         self._router: zenoh.Session | None = None

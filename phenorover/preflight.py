@@ -34,7 +34,8 @@ from common.config import (
 )
 from common.field import FieldError, load_field
 from common.field_geojson import load_frame
-from services import SERVICES
+from common.robot import load_robot, robot_path
+from services import JOBS, SERVICES
 
 # services that cannot start without the surveyed field: its georeference is the frame
 # they publish in (viz and the planner do without one until a plan names it)
@@ -42,9 +43,9 @@ NEEDS_FIELD = ("sim", "gnss", "nav")
 
 
 def config_type(service: str, where: str) -> type[msgspec.Struct]:
-    spec = SERVICES.get(service)
+    spec = SERVICES.get(service) or JOBS.get(service)
     if spec is None:
-        known = ", ".join(sorted(SERVICES))
+        known = ", ".join(sorted(SERVICES | JOBS))
         raise ConfigError(f"{where}: unknown service {service!r} (known: {known})")
     module, _, attr = spec.partition(":")
     t: type[msgspec.Struct] = getattr(importlib.import_module(module), attr)
@@ -108,6 +109,14 @@ def check_field(manifest: Manifest, path: Path) -> None:
             load_field(manifest.field)
     except FieldError as exc:
         raise ConfigError(f"{path}: field: {exc}") from None
+
+
+def check_robot(manifest: Manifest, path: Path) -> None:
+    """The manifest's robot description loads. Raises ConfigError naming the file."""
+    try:
+        load_robot(manifest.robot)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: robot: {exc}") from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -239,6 +248,14 @@ def _zenoh(zs: ZenohSettings) -> list[Finding]:
     return out
 
 
+def _robot_ok(manifest: Manifest) -> bool:
+    try:
+        robot_path(manifest.robot)
+    except ConfigError:
+        return False
+    return True
+
+
 def describe(manifest: Manifest, path: Path) -> list[tuple[str, Finding]]:
     """Every (section, finding) of a validated manifest, problems included."""
     found = [("zenoh", f) for f in _zenoh(manifest.zenoh)]
@@ -250,6 +267,12 @@ def describe(manifest: Manifest, path: Path) -> list[tuple[str, Finding]]:
     except ConfigError as exc:
         field = Finding(field.what, str(exc).removeprefix(f"{path}: field: "))
     found.append(("field", field))
+    robot = Finding(str(robot_path(manifest.robot)) if _robot_ok(manifest) else manifest.robot)
+    try:
+        check_robot(manifest, path)
+    except ConfigError as exc:
+        robot = Finding(robot.what, str(exc).removeprefix(f"{path}: robot: "))
+    found.append(("robot", robot))
     found.append(("run dir", Finding(manifest.run_dir, _folder(manifest.run_dir))))
     for name, section in manifest.services.items():
         where = f"[services.{name}]"

@@ -14,3 +14,10 @@ SERVICES: dict[str, str] = {
     "mission": "services.mission.config:MissionConfig",
     "viz": "services.viz.config:VizConfig",
 }
+
+# Jobs: configured in a manifest like a service (``[services.register]``) but run on
+# demand, by a command or by another service as a child process, so the launcher
+# validates their sections and never starts them.
+JOBS: dict[str, str] = {
+    "register": "services.register.config:RegisterRunConfig",
+}

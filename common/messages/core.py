@@ -1,6 +1,6 @@
 """Base types shared by every message.
 
-Conventions (see README, "Messages"):
+Conventions (see docs/architecture.md, "Messages"):
 - every message is a frozen msgspec Struct deriving from :class:`Message`, so it
   carries ``stamp_ns`` (nanoseconds, on the clock of the publishing service: wall
   time, or sim time in simulation) and ``frame_id`` (REP-103/105 frame name);

@@ -51,7 +51,16 @@ class MissionPhase(enum.StrEnum):
     FAILED = "failed"
 
 
+# MissionState.detail of a survey that is done while its scans are being registered
+# (a child process of the mission service); another detail once registration ends
+REGISTERING = "registering"
+
+
 class MissionState(Message, frozen=True, kw_only=True):
+    """``distance_m``: metres driven since the survey (or its resumption) began,
+    measured: the pose estimate's speed (wheel odometry fused with GNSS) over time.
+    ``planned_m``: the plan's tour length (m), planned, not measured."""
+
     mission: str
     phase: MissionPhase
     scans_done: int = 0
@@ -60,6 +69,7 @@ class MissionState(Message, frozen=True, kw_only=True):
     current_scan: int = 0
     distance_m: NonNegative = 0.0
     detail: str = ""
+    planned_m: NonNegative = 0.0
 
 
 class MissionEvent(Message, frozen=True, kw_only=True):

@@ -6,11 +6,11 @@ Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The mobile base. Limits default to the Husky A200 (1.0 m/s; Clearpath's
-    husky_control caps turning at 2 rad/s). ``watchdog_s``: with no velocity command for
-    this long the wheels are stopped: navigation commands at 20 Hz, so 0.25 s is five
-    missed commands, and a robot at 0.5 m/s whose navigation dies stands within 0.2 m
-    (0.125 m to the trip, about 0.08 m of drivetrain lag).
+    """The mobile base; the speed limits it clips commands to are the robot
+    description's ``[limits]`` (:mod:`common.robot`). ``watchdog_s``: with no velocity
+    command for this long the wheels are stopped: navigation commands at 20 Hz, so
+    0.25 s is five missed commands, and a robot at 0.5 m/s whose navigation dies stands
+    within 0.2 m (0.125 m to the trip, about 0.08 m of drivetrain lag).
 
     ``backend``: ``sim`` (the simulator's base) or ``ros2`` (any ROS 2 base, the
     Husky's own driver included, through zenoh-bridge-ros2dds: Twist out on
@@ -18,8 +18,6 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     """
 
     backend: Literal["sim", "ros2"]  # required: a robot must never drive a simulated base
-    max_speed: Pos = 1.0
-    max_turn_rate: Pos = 2.0
     watchdog_s: Pos = 0.25
     commander: str = "nav"
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0

@@ -18,7 +18,8 @@ from services.base.drive import CommandGate, OdometryIntegrator
 class BaseService:
     def __init__(self, ctx: Context, cfg: BaseConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
-        self.gate = CommandGate(cfg.max_speed, cfg.max_turn_rate, int(cfg.watchdog_s * 1e9))
+        lim = ctx.robot.limits
+        self.gate = CommandGate(lim.max_speed, lim.max_turn_rate, int(cfg.watchdog_s * 1e9))
         self.odom = OdometryIntegrator()
         self._lock = threading.Lock()
         self.odom_pub = ctx.bus.publisher(keys.BASE_ODOM)

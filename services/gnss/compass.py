@@ -1,7 +1,8 @@
 """Dual-antenna GNSS compass (paper eq. 2), pure.
 
 Antenna 1 is the rear one and antenna 2 the front one, both on the robot's +x axis
-(``base_link``), 0.95 m apart in the paper's build. Their positions come in a local
+(``base_link``), 0.95 m apart in the paper's build; their mounting comes from the robot
+description (:mod:`common.robot`) through :meth:`Compass.of`. Their positions come in a local
 ENU-aligned frame (``map`` or ``field``; metres), and the heading is the yaw of
 ``base_link`` in that same frame (REP-103: 0 along +x, counter-clockwise positive,
 wrapped to [-pi, pi)). In ``map`` (ENU) yaw 0 points east, not north.
@@ -21,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.geo import wrap_angle
+from common.robot import Robot, default_robot
 
 Positive = Annotated[float, msgspec.Meta(gt=0.0)]
 
@@ -34,16 +36,31 @@ class BaselineMismatch(CompassError):
 
 
 class CompassConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Antenna mounting in ``base_link`` (x forward, y left, z up; metres).
+    """``[services.gnss.compass]``. The default tolerance, 5 cm, is about 5 sigma of the
+    along-baseline error of two independent 7 mm RTK fixes (sqrt(2) * 7 mm ~ 1 cm), and
+    below what a float fix (decimetres) usually gives."""
 
-    The default tolerance, 5 cm, is about 5 sigma of the along-baseline error of two
-    independent 7 mm RTK fixes (sqrt(2) * 7 mm ~ 1 cm), and below what a float fix
-    (decimetres) usually gives.
-    """
-
-    antenna1_xyz_m: tuple[float, float, float] = (-0.475, 0.0, 1.10)
-    antenna2_xyz_m: tuple[float, float, float] = (0.475, 0.0, 1.10)
     baseline_tolerance_m: Positive = 0.05
+
+
+class Compass(msgspec.Struct, frozen=True, kw_only=True):
+    """The compass as mounted: both antennas' phase centres in ``base_link`` (x
+    forward, y left, z up; metres) and the baseline tolerance (m)."""
+
+    antenna1_xyz_m: tuple[float, float, float]
+    antenna2_xyz_m: tuple[float, float, float]
+    baseline_tolerance_m: float = 0.05
+
+    @classmethod
+    def of(cls, robot: Robot, cfg: CompassConfig | None = None) -> Compass:
+        """The compass on ``robot`` (its antennas 1 and 2), tolerance from ``cfg``."""
+        cfg = cfg or CompassConfig()
+        a1, a2 = robot.antennas
+        return cls(
+            antenna1_xyz_m=a1.xyz,
+            antenna2_xyz_m=a2.xyz,
+            baseline_tolerance_m=cfg.baseline_tolerance_m,
+        )
 
     def __post_init__(self) -> None:
         if self.baseline_m < 0.1:
@@ -89,7 +106,7 @@ def compass_heading(
     p2: npt.ArrayLike,
     cov1: npt.ArrayLike,
     cov2: npt.ArrayLike,
-    cfg: CompassConfig | None = None,
+    cfg: Compass | None = None,
 ) -> CompassHeading:
     """Heading from antenna 1 (rear) at ``p1`` and antenna 2 (front) at ``p2``.
 
@@ -102,7 +119,7 @@ def compass_heading(
     Raises :class:`BaselineMismatch` when the measured baseline is off by more than
     the tolerance, :class:`CompassError` on malformed input.
     """
-    cfg = cfg or CompassConfig()
+    cfg = cfg or Compass.of(default_robot())
     a, b = np.asarray(p1, dtype=float), np.asarray(p2, dtype=float)
     if a.shape != b.shape or a.shape not in ((2,), (3,)) or not np.all(np.isfinite(a - b)):
         raise CompassError(f"antenna positions must be finite 2- or 3-vectors: {a!r}, {b!r}")

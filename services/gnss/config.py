@@ -22,7 +22,9 @@ def _antennas() -> list[AntennaConfig]:
 
 
 class GnssConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The two rover receivers and the GNSS compass.
+    """The two rover receivers and the GNSS compass. ``antennas`` says how to reach
+    each receiver; where its antenna sits on the robot is the robot description's
+    (:mod:`common.robot`), antenna ``id`` N being its Nth ``[[antennas]]``.
 
     ``backend``: ``sim`` (NMEA made from the simulator's antenna truth through ``rtk``),
     ``nmea-serial`` or ``nmea-tcp``. ``fallback_sigma_m`` is the 1-sigma horizontal

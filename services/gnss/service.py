@@ -9,6 +9,7 @@ from common import keys
 from common.field_geojson import load_frame
 from common.messages.gnss import NavSatFix
 from common.service import Context
+from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
 from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
 from services.gnss.receiver import Receiver, open_receiver
@@ -19,6 +20,7 @@ class GnssService:
     def __init__(self, ctx: Context, cfg: GnssConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
         self.frame = load_frame(ctx.field)
+        self.compass = Compass.of(ctx.robot, cfg.compass)
         self.heading_pub = ctx.bus.publisher(keys.GNSS_HEADING)
         self.fix_pubs = {
             a.id: ctx.bus.publisher(keys.GNSS_FIX.at(antenna=a.id)) for a in cfg.antennas
@@ -36,7 +38,7 @@ class GnssService:
                 return
             f1, f2 = pair[0][1], pair[1][1]
             del self._latest[1], self._latest[2]
-        self.heading_pub.put(heading(f1, f2, self.frame, self.cfg.compass))
+        self.heading_pub.put(heading(f1, f2, self.frame, self.compass))
 
     def _read(self, rx: Receiver, stop: threading.Event) -> None:
         splitter = LineSplitter()

@@ -9,7 +9,7 @@ import numpy as np
 
 from common.geo import FieldFrame
 from common.messages.gnss import FixType, GnssHeading, NavSatFix
-from services.gnss.compass import CompassConfig, CompassError, compass_heading
+from services.gnss.compass import Compass, CompassError, compass_heading
 from services.gnss.nmea import Gga, Gst
 
 
@@ -70,7 +70,7 @@ def fix_in_field(fix: NavSatFix, frame: FieldFrame) -> tuple[np.ndarray, np.ndar
     return np.array([float(x), float(y), float(z)]), frame.enu_cov_to_field(fix.position_covariance)
 
 
-def heading(f1: NavSatFix, f2: NavSatFix, frame: FieldFrame, cfg: CompassConfig) -> GnssHeading:
+def heading(f1: NavSatFix, f2: NavSatFix, frame: FieldFrame, compass: Compass) -> GnssHeading:
     """The compass heading from a same-epoch pair of fixes (paper eq. 2).
 
     Valid only when both antennas have an RTK fix and the measured baseline matches
@@ -82,7 +82,7 @@ def heading(f1: NavSatFix, f2: NavSatFix, frame: FieldFrame, cfg: CompassConfig)
     stamp = max(f1.stamp_ns, f2.stamp_ns)
     both_fixed = f1.fix_type == FixType.FIX and f2.fix_type == FixType.FIX
     try:
-        h = compass_heading(p1, p2, c1, c2, cfg)
+        h = compass_heading(p1, p2, c1, c2, compass)
     except CompassError:
         yaw = math.atan2(p2[1] - p1[1], p2[0] - p1[0])
         return GnssHeading(

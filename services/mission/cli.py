@@ -35,12 +35,13 @@ def add_mission_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def describe(s: MissionState) -> str:
-    """One line: phase, scans, distance; a finished survey that left locations
-    unscanned says how many."""
+    """One line: phase, scans, distance (driven, measured; the plan's length beside it,
+    labelled planned); a finished survey that left locations unscanned says how many."""
     missed = s.scans_total - s.scans_done
     return (
         f"{s.mission or '-'}: {s.phase.value}, {s.scans_done}/{s.scans_total} scans done, "
-        f"{s.scans_failed} failed, {s.distance_m:.1f} m driven"
+        f"{s.scans_failed} failed, {s.distance_m:.1f} m driven (measured"
+        + (f"; {s.planned_m:.1f} m planned)" if s.planned_m > 0 else ")")
         + (f" ({s.detail})" if s.detail else "")
         + (
             f"; {missed} of {s.scans_total} locations NOT scanned"

@@ -30,8 +30,8 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     scan being taken for this long and the attempt is lost (the scanner restarted).
     ``resume``: pick up an unfinished mission found in the run
     folder when the service starts. ``register_on_done``: register the scans (``python
-    -m services.register RUN_DIR``, a child process at low priority) once the mission
-    is done.
+    -m services.register RUN_DIR --manifest M``, a child process at low priority, with
+    the manifest's ``[services.register]`` options) once the mission is done.
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)

@@ -1,20 +1,9 @@
-"""The mission log: every step of a survey in SQLite (``runs/<mission>/mission.db``),
+"""The mission log's writer: every step of a survey in SQLite (``runs/<mission>/mission.db``),
 one transaction per change, written before the next step begins, so a crash or a
 power cut loses nothing and a restart resumes at the first unfinished scan.
 
-Schema (also in the README):
-
-- ``mission``: one row: ``id``, ``field``, ``created_ns``, ``plan_json`` (the plan
-  the survey follows, verbatim), ``state`` (running, paused, done, aborted).
-- ``steps``: one row per scan location in tour order: ``idx``, ``scan_id``,
-  ``cand_id``, planned ``x``, ``y``, ``yaw``; ``status`` (pending, driving, scanning,
-  done, failed, skipped); ``attempts``; ``file`` (the scan on the scanner's card);
-  ``started_ns``/``ended_ns`` (scan start and end, clock of the mission service);
-  pose statistics over the scan from the navigation estimate: ``mean_x``,
-  ``mean_y``, ``mean_z``, ``mean_yaw``, ``sd_x``, ``sd_y``, ``sd_z``, ``sd_yaw``
-  (metres, radians); the inclinometer's ``pitch`` and ``roll`` (radians); ``reason``
-  for a failed or skipped step.
-- ``events``: ``stamp_ns``, ``level`` (info, warning, error), ``text``.
+The schema, the :class:`~common.missionlog.Step` row and the read-only reader that
+everyone else uses are in :mod:`common.missionlog` (also described in the README).
 """
 
 from __future__ import annotations
@@ -24,52 +13,16 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS mission (
-    id TEXT PRIMARY KEY, field TEXT NOT NULL, created_ns INTEGER NOT NULL,
-    plan_json TEXT NOT NULL, state TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS steps (
-    idx INTEGER PRIMARY KEY, scan_id INTEGER NOT NULL, cand_id INTEGER NOT NULL,
-    x REAL NOT NULL, y REAL NOT NULL, yaw REAL,
-    status TEXT NOT NULL DEFAULT 'pending', attempts INTEGER NOT NULL DEFAULT 0,
-    file TEXT, started_ns INTEGER, ended_ns INTEGER,
-    mean_x REAL, mean_y REAL, mean_z REAL, mean_yaw REAL,
-    sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL, pitch REAL, roll REAL, reason TEXT
-);
-CREATE TABLE IF NOT EXISTS events (
-    stamp_ns INTEGER NOT NULL, level TEXT NOT NULL, text TEXT NOT NULL
-);
-"""
-
-STEP_STATES = ("pending", "driving", "scanning", "done", "failed", "skipped")
-FINISHED = ("done", "failed", "skipped")
-
-
-@dataclasses.dataclass(frozen=True)
-class Step:
-    idx: int
-    scan_id: int
-    cand_id: int
-    x: float
-    y: float
-    yaw: float | None
-    status: str
-    attempts: int
-    file: str | None = None
-    started_ns: int | None = None
-    ended_ns: int | None = None
-    mean_x: float | None = None
-    mean_y: float | None = None
-    mean_z: float | None = None
-    mean_yaw: float | None = None
-    sd_x: float | None = None
-    sd_y: float | None = None
-    sd_z: float | None = None
-    sd_yaw: float | None = None
-    pitch: float | None = None
-    roll: float | None = None
-    reason: str | None = None
+from common.missionlog import (
+    FINISHED,
+    SCHEMA,
+    STEP_STATES,
+    Event,
+    Step,
+    select_events,
+    select_mission,
+    select_steps,
+)
 
 
 class MissionLog:
@@ -112,20 +65,13 @@ class MissionLog:
             )
 
     def mission(self) -> dict[str, Any] | None:
-        row = self.db.execute(
-            "SELECT id, field, created_ns, plan_json, state FROM mission"
-        ).fetchone()
-        if row is None:
-            return None
-        return dict(zip(("id", "field", "created_ns", "plan_json", "state"), row, strict=True))
+        return select_mission(self.db)
 
     def set_state(self, state: str) -> None:
         self._tx("UPDATE mission SET state = ?", (state,))
 
     def steps(self) -> list[Step]:
-        cur = self.db.execute("SELECT * FROM steps ORDER BY idx")
-        names = [d[0] for d in cur.description]
-        return [Step(**dict(zip(names, row, strict=True))) for row in cur.fetchall()]
+        return select_steps(self.db)
 
     def next_step(self) -> Step | None:
         """The first step not finished (done, failed or skipped), in tour order."""
@@ -143,5 +89,5 @@ class MissionLog:
     def event(self, stamp_ns: int, level: str, text: str) -> None:
         self._tx("INSERT INTO events VALUES (?, ?, ?)", (stamp_ns, level, text))
 
-    def events(self) -> list[tuple[int, str, str]]:
-        return list(self.db.execute("SELECT stamp_ns, level, text FROM events ORDER BY rowid"))
+    def events(self) -> list[Event]:
+        return select_events(self.db)

@@ -20,6 +20,7 @@ import msgspec
 from common import clock as clk
 from common import keys
 from common.messages.mission import (
+    REGISTERING,
     MissionAbort,
     MissionCommand,
     MissionEvent,
@@ -31,13 +32,14 @@ from common.messages.mission import (
     MissionStatusQuery,
 )
 from common.messages.plan import PlanRequest, PlanResult
+from common.robot import RUN_COPY, dump_robot, scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
+from services.mission.registration import RegistrationJob
 from services.mission.survey import Aborted, Survey
-from services.register.hook import REGISTERING, RegistrationJob
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0
@@ -89,6 +91,7 @@ class MissionService:
             current_scan=self.current,
             distance_m=self.survey.distance if self.survey else 0.0,
             detail=self.survey.detail if self.survey and self.active else self.detail,
+            planned_m=self.plan.tour.length if self.plan else 0.0,
         )
 
     @property
@@ -141,7 +144,9 @@ class MissionService:
                 raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc}") from None
         try:
             return self.ctx.bus.call(
-                keys.PLANNER_PLAN, PlanRequest(name=field), timeout=self.cfg.plan_timeout_s
+                keys.PLANNER_PLAN,
+                PlanRequest(name=field, scanner=scanner_model(self.ctx.robot)),
+                timeout=self.cfg.plan_timeout_s,
             )
         except RpcError as exc:
             raise RequestError(f"planner: {exc}") from None
@@ -169,6 +174,9 @@ class MissionService:
         tmp = path.parent / "plan.json.tmp"
         tmp.write_bytes(msgspec.json.encode(plan))
         tmp.replace(path.parent / "plan.json")
+        tmp = path.parent / f"{RUN_COPY}.tmp"
+        tmp.write_text(dump_robot(self.ctx.robot))
+        tmp.replace(path.parent / RUN_COPY)
         self.plan = plan
         self._launch(name, log, segs)
 
@@ -277,7 +285,7 @@ class MissionService:
         log.update(idx, status="failed", reason=why)
         self.event("error", f"{tag}: failed after {self.cfg.scan_retries + 1} attempts: {why}")
 
-    # --- registration at the end (see services/register/hook.py for why here) ---
+    # --- registration at the end (see services/mission/registration.py for why here) ---
     def _register(self) -> None:
         assert self.log is not None
         run_dir = self.log.path.parent
@@ -286,7 +294,7 @@ class MissionService:
             self.detail = text
             self.event(level, text)
 
-        job = RegistrationJob(run_dir, done)
+        job = RegistrationJob(run_dir, done, self.ctx.manifest)
         try:
             job.start()
         except OSError as exc:

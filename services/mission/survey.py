@@ -33,10 +33,11 @@ from common.messages.nav import (
     RenewRoute,
 )
 from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
+from common.missionlog import Step
 from common.service import Context
 from common.transport import Latest, RpcError, RpcTimeout
 from services.mission.config import MissionConfig
-from services.mission.log import MissionLog, Step
+from services.mission.log import MissionLog
 from services.mission.plan import Segment
 from services.mission.stats import pose_stats
 

@@ -1,7 +1,12 @@
+from __future__ import annotations
+
+import dataclasses
 from typing import Annotated
 
 import msgspec
 
+from common.config import ConfigError
+from common.robot import Robot
 from services.nav.ekf import EkfConfig
 from services.nav.follower import FollowerConfig
 
@@ -9,11 +14,8 @@ Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """EKF localization and route following.
-
-    ``antenna_levers``: horizontal (x, y) of antennas 1 and 2 in base_link (m), as
-    mounted on the paper's robot (0.95 m baseline along x); ``antenna_height_m``: the
-    antennas' phase centres above base_link (m), for the pose's ``z``. ``fuse_fix_types``: GGA
+    """EKF localization and route following; the antennas, the lidar and the robot's
+    front are the robot description's (:class:`Mounts`). ``fuse_fix_types``: GGA
     fix types whose positions are fused. RTK-fixed only by default: float errors
     (decimetres) are correlated over tens of seconds, and fusing them at 10 Hz as if
     independent makes the filter overconfident enough to reject the fixed solutions
@@ -33,11 +35,7 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 20.0
     ekf: EkfConfig = msgspec.field(default_factory=EkfConfig)
     follower: FollowerConfig = msgspec.field(default_factory=FollowerConfig)
-    antenna_levers: tuple[tuple[float, float], tuple[float, float]] = ((-0.475, 0.0), (0.475, 0.0))
-    antenna_height_m: Pos = 1.10
     fuse_fix_types: list[str] = msgspec.field(default_factory=lambda: ["FIX"])
-    lidar_xy: tuple[float, float] = (0.45, 0.0)
-    robot_front_m: Pos = 0.495
     obstacle_distance_m: Pos = 0.6
     obstacle_half_width_m: Pos = 0.30
     obstacle_min_points: Annotated[int, msgspec.Meta(ge=1)] = 3
@@ -51,3 +49,39 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     # faster than real time needs more: a fix late by 50 ms of wall time is late by
     # 0.5 s of sim time at 10x (deploy/sim.toml says so).
     max_fix_age_s: Pos = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class Mounts:
+    """What navigation uses of the robot description, in base_link (m, rad):
+    ``levers``: (x, y) of antennas 1 and 2, the EKF's planar lever arms;
+    ``antenna_height``: their mean height, taken off a fix's altitude for base_link's
+    ``z``; ``lidar``: (x, y, yaw) of the lidar; ``front``: x of the robot's front."""
+
+    levers: tuple[tuple[float, float], tuple[float, float]]
+    antenna_height: float
+    lidar: tuple[float, float, float]
+    front: float
+
+    @classmethod
+    def of(cls, robot: Robot) -> Mounts:
+        a1, a2 = robot.antennas
+        return cls(
+            levers=((a1.x, a1.y), (a2.x, a2.y)),
+            antenna_height=robot.antenna_height,
+            lidar=(robot.lidar.x, robot.lidar.y, robot.lidar.yaw_rad),
+            front=robot.footprint.length / 2.0,
+        )
+
+
+def check_limits(cfg: NavConfig, robot: Robot) -> None:
+    """Raise ConfigError (one line) when the route follower is set to go faster or
+    accelerate harder than the robot can: it would then plan for motion the drivetrain
+    clips, and overshoot every stop."""
+    for key in ("max_speed", "max_accel", "max_turn_rate", "max_turn_accel"):
+        value, limit = getattr(cfg.follower, key), getattr(robot.limits, key)
+        if value > limit:
+            raise ConfigError(
+                f"[services.nav.follower] {key} = {value:g} is more than robot "
+                f"{robot.name}'s [limits] {key} = {limit:g}"
+            )

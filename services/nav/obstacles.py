@@ -5,12 +5,27 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+F64 = npt.NDArray[np.float64]
+
+
+def _in_base_link(
+    ranges: npt.NDArray[np.floating],
+    angle_min: float,
+    angle_increment: float,
+    lidar: tuple[float, float, float],
+) -> tuple[F64, F64]:
+    """x and y (m) in base_link of every return (inf ranges dropped)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    a = lidar[2] + angle_min + angle_increment * np.arange(len(r))
+    ok = np.isfinite(r)
+    return lidar[0] + r[ok] * np.cos(a[ok]), lidar[1] + r[ok] * np.sin(a[ok])
+
 
 def obstacle_ahead(
     ranges: npt.NDArray[np.floating],
     angle_min: float,
     angle_increment: float,
-    lidar_xy: tuple[float, float],
+    lidar: tuple[float, float, float],
     front_x: float,
     distance: float,
     half_width: float,
@@ -18,14 +33,11 @@ def obstacle_ahead(
 ) -> bool:
     """True if a return lies within ``distance`` ahead of the robot's front (base_link
     x = ``front_x``) and ``half_width`` of its centre line. Ranges in metres, inf for
-    no return; the lidar sits at ``lidar_xy`` in base_link, facing +x. ``min_points``
-    returns are needed, so a single noisy return (the UST-05LX's +-40 mm) off a plot
-    edge beside a narrow lane does not stop the robot."""
-    r = np.asarray(ranges, dtype=np.float64)
-    a = angle_min + angle_increment * np.arange(len(r))
-    ok = np.isfinite(r)
-    x = lidar_xy[0] + r[ok] * np.cos(a[ok])
-    y = lidar_xy[1] + r[ok] * np.sin(a[ok])
+    no return; the lidar sits at ``lidar`` = (x, y, yaw) in base_link (m, rad), its
+    0-degree beam along yaw. ``min_points`` returns are needed, so a single noisy
+    return (the UST-05LX's +-40 mm) off a plot edge beside a narrow lane does not stop
+    the robot."""
+    x, y = _in_base_link(ranges, angle_min, angle_increment, lidar)
     inside = (x > front_x) & (x < front_x + distance) & (np.abs(y) < half_width)
     return int(np.count_nonzero(inside)) >= min_points
 
@@ -34,7 +46,7 @@ def obstacle_on_leg(
     ranges: npt.NDArray[np.floating],
     angle_min: float,
     angle_increment: float,
-    lidar_xy: tuple[float, float],
+    lidar: tuple[float, float, float],
     pose: tuple[float, float, float],
     leg: tuple[float, float, float, float],
     front_x: float,
@@ -47,11 +59,7 @@ def obstacle_on_leg(
     in-place turn the robot may sit 2 deg and a few cm off its lane, and a body-aligned
     box then reaches the plot edges 0.4 m beside a narrow lane. ``pose`` is the
     robot's (x, y, yaw) in the field frame."""
-    r = np.asarray(ranges, dtype=np.float64)
-    a = angle_min + angle_increment * np.arange(len(r))
-    ok = np.isfinite(r)
-    bx = lidar_xy[0] + r[ok] * np.cos(a[ok])
-    by = lidar_xy[1] + r[ok] * np.sin(a[ok])
+    bx, by = _in_base_link(ranges, angle_min, angle_increment, lidar)
     x, y, yaw = pose
     c, s = np.cos(yaw), np.sin(yaw)
     px, py = x + c * bx - s * by, y + s * bx + c * by

@@ -26,7 +26,7 @@ from common.messages.nav import (
 )
 from common.service import Context
 from common.status import parse_token
-from services.nav.config import NavConfig
+from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import Localizer
 from services.nav.follower import Follower
 from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
@@ -35,6 +35,8 @@ from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
 class NavService:
     def __init__(self, ctx: Context, cfg: NavConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
+        check_limits(cfg, ctx.robot)
+        self.mounts = Mounts.of(ctx.robot)
         self.frame = load_frame(ctx.field)
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
@@ -76,7 +78,7 @@ class NavService:
             return
         x, y, z = self.frame.wgs84_to_field(m.latitude, m.longitude, m.altitude)
         cov3 = self.frame.enu_cov_to_field(m.position_covariance)
-        lever = self.cfg.antenna_levers[m.antenna - 1]
+        lever = self.mounts.levers[m.antenna - 1]
         t = m.stamp_ns / 1e9
         with self._lock:
             if self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever):
@@ -85,7 +87,7 @@ class NavService:
                 self._last_fix = max(self._last_fix, t)
             # the antennas sit symmetrically about base_link, so their mean height less
             # the mast is base_link's on a pitched robot too (to 1 - cos(tilt))
-            self.loc.update_height(t, float(z) - self.cfg.antenna_height_m, float(cov3[2, 2]))
+            self.loc.update_height(t, float(z) - self.mounts.antenna_height, float(cov3[2, 2]))
 
     def _on_heading(self, m: GnssHeading) -> None:
         if m.valid:
@@ -105,10 +107,10 @@ class NavService:
                 ranges,
                 m.angle_min,
                 m.angle_increment,
-                c.lidar_xy,
+                self.mounts.lidar,
                 pose,
                 (leg.x0, leg.y0, leg.x1, leg.y1),
-                c.robot_front_m,
+                self.mounts.front,
                 c.obstacle_distance_m,
                 c.obstacle_half_width_m,
                 c.obstacle_min_points,
@@ -118,8 +120,8 @@ class NavService:
                 ranges,
                 m.angle_min,
                 m.angle_increment,
-                c.lidar_xy,
-                c.robot_front_m,
+                self.mounts.lidar,
+                self.mounts.front,
                 c.obstacle_distance_m,
                 c.obstacle_half_width_m,
                 c.obstacle_min_points,

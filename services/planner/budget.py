@@ -6,7 +6,7 @@ visibility table is cut from dense (candidates x cells) buffers. Measured on the
 2-core development machine (exact visibility, exact cover):
 
 - ENGR, SPL: 77 x 2,160 = 1.7e5; well under a second.
-- 40 rows x 50 plots (the README's benchmark): 2,091 x 144,000 = 3.0e8; 28 s in all,
+- 40 rows x 50 plots (the planning benchmark's largest field): 2,091 x 144,000 = 3.0e8; 28 s in all,
   5.8 M visible pairs, 0.7 GB peak.
 - 100 x 100 plots: 10,201 x 720,000 = 7.3e9; 137 s and 5.0 GB.
 

@@ -10,8 +10,10 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from common.field import FieldError, ScannerModel
+from common.config import ConfigError
+from common.field import FieldError
 from common.messages.plan import PlanOptions, PlanResult
+from common.robot import load_robot, scanner_model
 from services.planner.outputs import write_all
 from services.planner.request import request_from_source
 
@@ -26,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-hits", type=int, default=1)
     p.add_argument("--tour", choices=["auto", "held-karp", "cp-sat", "gls"], default="auto")
     p.add_argument("--out", type=Path, default=None, help="output folder (runs/plan-FIELD)")
+    p.add_argument(
+        "--robot", default="", help="robot description: its scanner height (default: Husky)"
+    )
     p.add_argument("--remote", action="store_true", help="ask the planner service")
     p.add_argument("--manifest", type=Path, default=None)
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
@@ -97,8 +102,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
         tour=args.tour,
     )
     try:
-        req = request_from_source(args.field, ScannerModel(), opts, inline=args.remote)
-    except FieldError as exc:
+        scanner = scanner_model(load_robot(args.robot))
+        req = request_from_source(args.field, scanner, opts, inline=args.remote)
+    except (FieldError, ConfigError) as exc:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2
     if args.remote:

@@ -19,6 +19,7 @@ from pathlib import Path
 from common import keys
 from common.field import FIELDS_DIR, FieldError, field_path
 from common.messages.plan import PlanRequest, PlanResult
+from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError
 from services.planner.budget import check
@@ -97,7 +98,7 @@ class PlannerService:
 
     def run(self, stop: threading.Event) -> None:
         if self.cfg.warm_up:  # loads numba's kernels and caches the deployment's plan
-            req = PlanRequest(name=self.ctx.field)
+            req = PlanRequest(name=self.ctx.field, scanner=scanner_model(self.ctx.robot))
             threading.Thread(target=self._warm_up, args=(req,), daemon=True).start()
         stop.wait()
         self.pool.close()

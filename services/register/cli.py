@@ -8,7 +8,12 @@ cloud to cloud, solves the target-based reference from the spheres, and writes i
 - ``registered.e57``: every scan with its final pose (CloudCompare, FARO SCENE);
 - ``registered.laz``: all scans merged and voxel-downsampled in the field frame (what
   the viz service shows), and ``utm.laz`` in UTM when the field is georeferenced;
-- ``report.json``, ``report.md`` and the PNG figures of :mod:`.figures`.
+- ``report.json``, ``report.md`` and the PNG figures of :mod:`.figures`;
+- ``register.toml``: the options it ran with (:mod:`.config`: the manifest's
+  ``[services.register]``, ``--config``, ``--set`` and the flags).
+
+It reads nothing but what a real robot records: the mission log, the scans and the
+options. Scoring against a simulator's truth is ``phenorover eval register``.
 
 Every file is written under a temporary name and renamed when complete, so an
 interrupted registration leaves the previous outputs (or none), never half a file.
@@ -31,21 +36,14 @@ from typing import Any
 
 import msgspec
 
-from services.register.pipeline import RegisterConfig, Registration, register
+from common.config import dump_toml
+from common.robot import RUN_COPY, load_robot
+from services.register.config import RegisterRunConfig, add_config_arguments, resolve
+from services.register.pipeline import Registration, register
 from services.register.report import build_report, markdown
 from services.register.runlog import Placement, RunData, RunError, load_run, scan_inputs
 
 log = logging.getLogger("phenorover.register")
-
-
-class RegisterRunConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``--config`` TOML: ``[placement]`` (:class:`.runlog.Placement`), ``[register]``
-    (:class:`.pipeline.RegisterConfig`), and the merged LAZ's voxel (m)."""
-
-    placement: Placement = Placement()
-    register: RegisterConfig = RegisterConfig()
-    laz_voxel: float = 0.01
-    figures: bool = True
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,7 +57,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="where to look for scan files missing at their recorded path (repeatable)",
     )
-    p.add_argument("--config", type=Path, default=None, help="TOML: placement and register")
+    add_config_arguments(p)
+    p.add_argument(
+        "--robot",
+        default=None,
+        help=f"robot description (default: RUN_DIR/{RUN_COPY}, kept by the mission, "
+        "else the shipped Husky)",
+    )
 
 
 def _atomic(path: Path, write: Callable[[Path], object]) -> None:
@@ -73,26 +77,15 @@ def _atomic(path: Path, write: Callable[[Path], object]) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def load_config(path: Path | None) -> RegisterRunConfig:
-    if path is None:
-        return RegisterRunConfig()
-    try:
-        return msgspec.toml.decode(path.read_bytes(), type=RegisterRunConfig)
-    except OSError as exc:
-        raise RunError(f"{path}: {exc.strerror}") from None
-    except msgspec.DecodeError as exc:
-        raise RunError(f"{path}: {exc}") from None
-
-
 def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: Path) -> None:
     """The E57, the LAZ files, the report and its figures (see the module docstring)."""
+    from common.pointcloud import write_e57, write_laz
     from services.register import figures
-    from services.register.io import write_laz, write_registered_e57
 
     out.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Any] = {}
     t = time.perf_counter()
-    _atomic(out / "registered.e57", lambda p: write_registered_e57(p, reg.scans))
+    _atomic(out / "registered.e57", lambda p: write_e57(p, reg.scans))
     outputs["e57"] = "registered.e57"
     log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
     counts: dict[str, int] = {}
@@ -128,6 +121,8 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
             if name:
                 figs.append(name)
         log.info("wrote figures: %s", ", ".join(figs))
+    _atomic(out / "register.toml", lambda p: p.write_text(dump_toml(cfg)))
+    outputs["config"] = "register.toml"
     write_report(run, reg, out, outputs, figs)
 
 
@@ -158,18 +153,17 @@ def run_register(
     out: Path | None = None,
     scan_dirs: list[Path] | None = None,
     cfg: RegisterRunConfig | None = None,
+    robot: str | Path | None = None,
 ) -> Registration:
-    """Register one run folder and write its outputs; raises RunError or ValueError."""
+    """Register one run folder and write its outputs; raises RunError or ValueError
+    (ConfigError for a bad robot description). ``robot``: see ``--robot``."""
     cfg = cfg or RegisterRunConfig()
     run = load_run(run_dir)
-    inputs = scan_inputs(run, cfg.placement, scan_dirs or [])
-    truth = sum(s.true_pose is not None for s in inputs)
-    log.info(
-        "mission %s: %d scans to register%s",
-        run.mission["id"],
-        len(inputs),
-        f" ({truth} with simulator truth, for evaluation)" if truth else "",
-    )
+    if robot is None:
+        copy = Path(run_dir) / RUN_COPY
+        robot = copy if copy.is_file() else ""
+    inputs = scan_inputs(run, Placement.of(load_robot(robot)), scan_dirs or [])
+    log.info("mission %s: %d scans to register", run.mission["id"], len(inputs))
     if not run.has_altitude:
         log.warning("the mission log has no altitude (z = 0): heights come from C2C only")
     rcfg = cfg.register
@@ -179,14 +173,6 @@ def run_register(
             rcfg, refine=msgspec.structs.replace(rcfg.refine, nav_sigma_z=1.0)
         )
     reg = register(inputs, rcfg)
-    r = reg.report
-    for name, m in (
-        ("navigation", r.navigation),
-        ("nav + C2C", r.c2c),
-        ("targets", r.target_based),
-    ):
-        if m.points_vs_truth is not None:
-            log.info("%s: mean point error vs truth %.2f cm", name, 100 * m.points_vs_truth.mean)
     write_outputs(run, reg, cfg, out or run_dir)
     return reg
 
@@ -194,7 +180,8 @@ def run_register(
 def cmd_register(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     try:
-        run_register(args.run_dir, args.out, args.scans, load_config(args.config))
+        cfg, _ = resolve(args)
+        run_register(args.run_dir, args.out, args.scans, cfg, args.robot)
     except (RunError, ValueError, OSError) as exc:
         print(f"phenorover register: {exc}", file=sys.stderr)
         return 2

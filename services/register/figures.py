@@ -6,8 +6,8 @@
   pose's spread over the scan (paper Figures 21-22; the log keeps the mean and SD
   of each scan's pose, so the boxes span mean +- 1 SD, whiskers +- 2 SD);
 - ``registration_hist.png``: per axis, the point errors of navigation-only and
-  navigation + C2C placement against the reference (the truth in simulation, else
-  the target-based registration; paper Figure 28 c-e).
+  navigation + C2C placement against the target-based registration (paper Figure
+  28 c-e).
 
 Each function writes one file and returns its name, or None when the data for it is
 missing (no plan in the log, no done scan).
@@ -26,9 +26,9 @@ import numpy as np
 from matplotlib.patches import Rectangle
 
 from common.geo import wrap_angle
+from common.poses import F64, apply
 from services.register.metrics import subsample
 from services.register.pipeline import Registration
-from services.register.poses import F64, apply
 from services.register.runlog import RunData
 
 DPI = 150
@@ -128,13 +128,7 @@ def stationary(run: RunData, out: Path) -> str | None:
 
 
 def registration_hist(reg: Registration, out: Path, samples: int = 5000) -> str | None:
-    rep = reg.report
-    truth = [s.true_pose for s in rep.scans]
-    if all(t is not None for t in truth):
-        ref = [np.asarray(t, dtype=np.float64) for t in truth]
-        against = "truth"
-    else:
-        ref, against = reg.target_poses, "target-based registration"
+    ref, against = reg.target_poses, "target-based registration"
     rng = np.random.default_rng(0)
     pts = [subsample(s.points, samples, rng) for s in reg.scans]
 

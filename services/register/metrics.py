@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
-from services.register.poses import F64, apply
+from common.poses import F64, apply
 
 I64 = npt.NDArray[np.int64]
 

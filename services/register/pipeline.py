@@ -1,5 +1,10 @@
 """``register``: navigation placement, C2C refinement, the target-based reference and
-all metrics for the scans of one survey. Progress goes to logging."""
+all metrics for the scans of one survey. Progress goes to logging.
+
+It takes what a real robot has (the scans and their navigation poses) and nothing
+else: every metric is against the target-based reference. Scoring against the
+simulator's truth is the evaluation's (``phenorover/eval/register``), from the outputs:
+the report keeps each scan's file, its poses of every method and its spheres."""
 
 from __future__ import annotations
 
@@ -13,7 +18,8 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from services.register.io import PosedScan, read_registered_e57
+from common.pointcloud import PosedScan, read_e57
+from common.poses import F64, check_pose
 from services.register.metrics import (
     CloudDistance,
     PointStats,
@@ -24,7 +30,6 @@ from services.register.metrics import (
     subsample,
     target_stats,
 )
-from services.register.poses import F64, apply, check_pose
 from services.register.refine import (
     RefineConfig,
     TargetObservation,
@@ -56,19 +61,21 @@ class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
 @dataclasses.dataclass(frozen=True, eq=False)
 class ScanInput:
     """One scan: an E57 file with its points in the scanner frame (its first data3D
-    entry is read, its pose ignored), the navigation pose (4x4 field <- scanner, see
-    :func:`.poses.scanner_pose`) and, in simulation, the true pose."""
+    entry is read, its pose ignored) and the navigation pose (4x4 field <- scanner,
+    see :func:`common.poses.scanner_pose`)."""
 
     path: Path
     nav_pose: F64
-    true_pose: F64 | None = None
     name: str = ""
 
 
 class ScanReport(msgspec.Struct, frozen=True, kw_only=True):
     """Per scan: points read and kept after downsampling, spheres found (their fit
     RMS, m), targets matched and whether they fixed the reference pose, and the poses
-    (4x4 field <- scanner, row-major lists)."""
+    (4x4 field <- scanner, row-major lists); ``c2c_without_targets_pose`` when the
+    report has that method. ``file``: the scan file registered. ``sphere_centres``:
+    the centres found (scanner frame, m), ``sphere_targets`` the target each was
+    matched to (-1: none), so targets can be scored from the report alone."""
 
     name: str
     points: int
@@ -80,7 +87,10 @@ class ScanReport(msgspec.Struct, frozen=True, kw_only=True):
     nav_pose: Pose
     c2c_pose: Pose
     target_pose: Pose
-    true_pose: Pose | None = None
+    file: str = ""
+    sphere_centres: list[tuple[float, float, float]] = msgspec.field(default_factory=list)
+    sphere_targets: list[int] = msgspec.field(default_factory=list)
+    c2c_without_targets_pose: Pose | None = None
 
 
 class PairReport(msgspec.Struct, frozen=True, kw_only=True):
@@ -95,14 +105,11 @@ class PairReport(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class MethodReport(msgspec.Struct, frozen=True, kw_only=True):
-    """A registration scored against the target-based reference and, in simulation,
-    against the truth (true poses; true target positions placed by them)."""
+    """A registration scored against the target-based reference."""
 
     targets_vs_reference: TargetStats
     points_vs_reference: PointStats | None
     cloud_vs_reference: CloudDistance | None
-    targets_vs_truth: TargetStats | None = None
-    points_vs_truth: PointStats | None = None
 
 
 class RegistrationReport(msgspec.Struct, frozen=True, kw_only=True):
@@ -123,14 +130,19 @@ class RegistrationReport(msgspec.Struct, frozen=True, kw_only=True):
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Registration:
-    """The report plus per-scan poses of every method and the scans themselves
-    (scanner frame) for writing outputs."""
+    """The report plus per-scan poses of every method, the scans themselves (scanner
+    frame, with the C2C pose) for writing outputs, and per scan the sphere centres
+    found (scanner frame) with their target labels (-1: unmatched).
+    ``plain_poses``: the C2C poses without the spheres when the report has them."""
 
     report: RegistrationReport
     nav_poses: list[F64]
     c2c_poses: list[F64]
     target_poses: list[F64]
     scans: list[PosedScan]
+    centres: list[F64]
+    labels: list[npt.NDArray[np.int64]]
+    plain_poses: list[F64] | None = None
 
 
 def _as_list(m: F64) -> Pose:
@@ -146,13 +158,9 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     timings: dict[str, float] = {}
     t0 = t = time.perf_counter()
     nav = [check_pose(s.nav_pose, f"{s.path}: navigation pose") for s in scans]
-    truth = [
-        None if s.true_pose is None else check_pose(s.true_pose, f"{s.path}: true pose")
-        for s in scans
-    ]
     data: list[PosedScan] = []
     for s, p in zip(scans, nav, strict=True):
-        first = read_registered_e57(s.path)
+        first = read_e57(s.path)
         if not first:
             raise ValueError(f"{s.path}: E57 file holds no scan")
         name = s.name or Path(s.path).stem
@@ -201,11 +209,6 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     rmax = cfg.refine.max_range
     full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
     ref_cloud = merged(full, tsol.poses)
-    true_centres = None
-    if all(tp is not None for tp in truth):
-        true_centres = _placed_targets(
-            centres, labels, [tp for tp in truth if tp is not None], len(tsol.centres)
-        )
 
     def score(poses: list[F64], is_reference: bool) -> MethodReport:
         pts, cloud = None, None
@@ -213,17 +216,10 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
             pts = point_stats(samples, poses, tsol.poses)
             src = subsample(merged(samples, poses), cfg.cloud_points, rng)
             cloud = cloud_distance(src, ref_cloud)
-        tt, pt = None, None
-        if true_centres is not None:
-            tposes = [tp for tp in truth if tp is not None]
-            tt = target_stats(centres, labels, poses, true_centres)
-            pt = point_stats(samples, poses, tposes)
         return MethodReport(
             targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
             points_vs_reference=pts,
             cloud_vs_reference=cloud,
-            targets_vs_truth=tt,
-            points_vs_truth=pt,
         )
 
     nav_r, c2c_r, tgt_r = score(nav, False), score(c2c, False), score(tsol.poses, True)
@@ -241,7 +237,10 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
             nav_pose=_as_list(nav[k]),
             c2c_pose=_as_list(c2c[k]),
             target_pose=_as_list(tsol.poses[k]),
-            true_pose=None if truth[k] is None else _as_list(truth[k]),  # type: ignore[arg-type]
+            file=str(scans[k].path),
+            sphere_centres=[(float(c[0]), float(c[1]), float(c[2])) for c in centres[k]],
+            sphere_targets=[int(v) for v in labels[k]],
+            c2c_without_targets_pose=None if plain_r is None else _as_list(plain[k]),
         )
         for k, (d, pr, fs) in enumerate(zip(data, prepared, found, strict=True))
     ]
@@ -266,17 +265,13 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
         time_s=total,
     )
     out_scans = [dataclasses.replace(d, pose=p) for d, p in zip(data, c2c, strict=True)]
-    return Registration(report, nav, c2c, tsol.poses, out_scans)
-
-
-def _placed_targets(
-    centres: list[F64], labels: list[npt.NDArray[np.int64]], poses: list[F64], k: int
-) -> F64:
-    """Target positions as the mean of the observations placed by ``poses``."""
-    out = np.full((k, 3), np.nan)
-    for t in range(k):
-        obs = [apply(p, c[lab == t]) for c, lab, p in zip(centres, labels, poses, strict=True)]
-        obs = [o for o in obs if len(o)]
-        if obs:
-            out[t] = np.vstack(obs).mean(axis=0)
-    return out
+    return Registration(
+        report,
+        nav,
+        c2c,
+        tsol.poses,
+        out_scans,
+        centres,
+        [np.asarray(lab, dtype=np.int64) for lab in labels],
+        None if plain_r is None else plain,
+    )

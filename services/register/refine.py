@@ -41,7 +41,8 @@ from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from services.register.poses import F64, apply, difference, inv, perturb
+from common.poses import F64, apply, inv
+from services.register.poses import difference, perturb
 
 log = logging.getLogger(__name__)
 Pos = Annotated[float, msgspec.Meta(gt=0)]

@@ -13,11 +13,13 @@ Tables:
 - stationary errors per scan location (paper Figures 21-22): distance from the
   planned point to the recorded mean position, heading error, the SD of the pose
   over the scan, the inclinometer's pitch and roll;
-- registration (paper Table 1): target statistics and scan point statistics of
-  navigation-only, navigation + C2C and target-based registration against the
-  target-based reference and, in simulation, against the truth; the Hausdorff-style
-  distances of each cloud to the target-based cloud (mean, SD, share below 2 and 3
-  cm, per axis).
+- registration (the metrics of the paper's Table 1): target statistics and scan
+  point statistics of navigation-only, navigation + C2C and target-based
+  registration against the target-based reference; the Hausdorff-style distances of
+  each cloud to the target-based cloud (mean, SD, share below 2 and 3 cm, per axis).
+
+The report holds our own figures only: the paper's figures beside them, and errors
+against a simulator's truth, are the evaluation's (``phenorover eval register``).
 
 Lengths in the tables are centimetres, angles degrees; report.json keeps SI units
 (m, rad) where it copies the registration report.
@@ -36,10 +38,6 @@ from services.register.runlog import RunData
 
 Json = dict[str, Any]
 METHODS = (("navigation", "Nav. sensors only"), ("c2c", "Nav. sensors + C2C"))
-PAPER = {  # Table 1 of the paper (cm), for the reader's comparison
-    "target_based": {"mean": 0.59, "horizontal": 0.53, "vertical": 0.22, "max": 2.10, "pt": 1.37},
-    "c2c": {"mean": 1.72, "horizontal": 1.34, "vertical": 0.82, "max": 3.02, "pt": 2.07},
-}
 
 
 def _cm(v: float | None) -> float | None:
@@ -89,10 +87,8 @@ def stationary_table(run: RunData) -> list[Json]:
     return rows
 
 
-def _method_row(name: str, label: str, m: MethodReport, truth: bool) -> Json:
-    t = m.targets_vs_truth if truth else m.targets_vs_reference
-    p = m.points_vs_truth if truth else m.points_vs_reference
-    c = None if truth else m.cloud_vs_reference
+def _method_row(name: str, label: str, m: MethodReport) -> Json:
+    t, p, c = m.targets_vs_reference, m.points_vs_reference, m.cloud_vs_reference
     row: Json = {"method": name, "label": label}
     row["targets"] = (
         None
@@ -136,7 +132,6 @@ def registration_table(rep: RegistrationReport) -> Json:
     if rep.c2c_without_targets is not None:
         # the spheres joined the C2C pose graph: also what the clouds alone give
         methods.insert(2, ("c2c_without_targets", "Nav. sensors + C2C, spheres left out"))
-    has_truth = rep.c2c.points_vs_truth is not None
     return {
         "scans": len(rep.scans),
         "reference_solved_scans": solved,
@@ -145,13 +140,7 @@ def registration_table(rep: RegistrationReport) -> Json:
         "pairs_kept": sum(p.kept for p in rep.pairs),
         "pairs_tried": len(rep.pairs),
         "time_s": rep.time_s,
-        "vs_reference": [_method_row(n, lab, getattr(rep, n), False) for n, lab in methods],
-        "vs_truth": (
-            [_method_row(n, lab, getattr(rep, n), True) for n, lab in methods]
-            if has_truth
-            else None
-        ),
-        "paper_cm": PAPER,
+        "vs_reference": [_method_row(n, lab, getattr(rep, n)) for n, lab in methods],
     }
 
 
@@ -171,11 +160,10 @@ def _f(v: Any, digits: int = 2) -> str:
     return "–" if v is None else f"{v:.{digits}f}"
 
 
-def _method_lines(rows: list[Json], paper: bool) -> list[str]:
+def _method_lines(rows: list[Json]) -> list[str]:
     out = [
-        "| method | target mean | horizontal | vertical | max point error | mean point error |"
-        + (" paper mean point error |" if paper else ""),
-        "|---|---|---|---|---|---|" + ("---|" if paper else ""),
+        "| method | target mean | horizontal | vertical | max point error | mean point error |",
+        "|---|---|---|---|---|---|",
     ]
     for r in rows:
         t, p = r["targets"] or {}, r["points"] or {}
@@ -187,8 +175,6 @@ def _method_lines(rows: list[Json], paper: bool) -> list[str]:
             _f(p.get("max_cm")),
             _f(p.get("mean_cm")),
         ]
-        if paper:
-            cells.append(_f(PAPER.get(r["method"], {}).get("pt")))
         out.append("| " + " | ".join(cells) + " |")
     return out
 
@@ -242,14 +228,9 @@ def markdown(report: Json, figures: list[str]) -> str:
                 "pose, so errors against it understate the truth)."
             ),
             "",
-            "Against the target-based reference (cm; paper Table 1):",
+            "Against the target-based reference (cm):",
             "",
-            *_method_lines(reg["vs_reference"], paper=True),
-        ]
-        if reg["vs_truth"]:
-            lines += ["", "Against the simulator's truth (cm):", ""]
-            lines += _method_lines(reg["vs_truth"], paper=False)
-        lines += [
+            *_method_lines(reg["vs_reference"]),
             "",
             "Cloud to the target-based cloud (Hausdorff-style nearest-neighbour distances):",
             "",
@@ -269,10 +250,6 @@ def markdown(report: Json, figures: list[str]) -> str:
                 f"| {r['label']} | {_f(h['mean_cm'])} | {_f(h['sd_cm'])} "
                 f"| {h['below_2cm']:.0%} | {h['below_3cm']:.0%} | {' | '.join(ax)} |"
             )
-        lines += [
-            "",
-            "Paper (ENGR, nav. sensors + C2C): 1.25 cm mean, SD 0.82 cm, 85 % < 2 cm, 95 % < 3 cm.",
-        ]
     if not nav["has_altitude"]:
         lines += [
             "",

@@ -16,19 +16,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sqlite3
 from collections.abc import Sequence
 from pathlib import Path
 
 import msgspec
-import numpy as np
 
-from common.geo import rot_zyx
 from common.messages.plan import PlanResult
-from services.mission.log import Step
+from common.missionlog import MissionLogError, Step, read_log
+from common.poses import F64, PoseError, scanner_pose
+from common.robot import Robot
 from services.register.pipeline import ScanInput
-from services.register.poses import F64, PoseError, scanner_pose
-from services.sim.truth_file import read_truth
 
 
 class RunError(ValueError):
@@ -38,18 +35,24 @@ class RunError(ValueError):
 class Placement(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """How a recorded navigation pose places the scanner (paper eq. 1).
 
-    ``lever``: the scanner's optical centre in base_link (m; the simulated Husky's
-    FARO sits 1.0 m above base_link). ``mount_yaw_deg``: the scanner's zero azimuth
-    from base_link x. ``antenna_height``: the GNSS antennas' height above base_link
-    (m) when navigation computes base_link from them with a *planar* lever arm (the
-    EKF does: it has no tilt): on a tilted robot the antennas lean
-    ``antenna_height * tilt`` sideways of base_link, which this corrects with the
-    inclinometer's pitch and roll; 0 when navigation already accounts for tilt.
+    ``lever``: the scanner's optical centre in base_link (m). ``mount_yaw_deg``: the
+    scanner's zero azimuth from base_link x. ``antenna_height``: the GNSS antennas'
+    height above base_link (m) when navigation computes base_link from them with a
+    *planar* lever arm (the EKF does: it has no tilt): on a tilted robot the antennas
+    lean ``antenna_height * tilt`` sideways of base_link, which this corrects with the
+    inclinometer's pitch and roll; 0 when navigation already accounts for tilt. All
+    three are the robot description's (:meth:`of`).
     """
 
-    lever: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    mount_yaw_deg: float = 0.0
-    antenna_height: float = 1.10
+    lever: tuple[float, float, float]
+    mount_yaw_deg: float
+    antenna_height: float
+
+    @classmethod
+    def of(cls, robot: Robot) -> Placement:
+        """The placement of ``robot``'s scanner, navigated by its antennas."""
+        s = robot.scanner
+        return cls(lever=s.xyz, mount_yaw_deg=s.yaw_deg, antenna_height=robot.antenna_height)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,24 +80,12 @@ def load_run(run_dir: str | Path) -> RunData:
     if not db.is_file():
         raise RunError(f"{db}: no mission log here (is {run} a run folder?)")
     try:
-        con = sqlite3.connect(f"file:{db.resolve()}?mode=ro", uri=True)
-    except sqlite3.Error as exc:
-        raise RunError(f"{db}: cannot open: {exc}") from None
-    try:
-        row = con.execute("SELECT id, field, created_ns, plan_json, state FROM mission").fetchone()
-        if row is None:
-            raise RunError(f"{db}: the mission table is empty")
-        mission = dict(zip(("id", "field", "created_ns", "plan_json", "state"), row, strict=True))
-        cur = con.execute("SELECT * FROM steps ORDER BY idx")
-        names = [d[0] for d in cur.description]
-        steps = [Step(**dict(zip(names, r, strict=True))) for r in cur.fetchall()]
-        events = [tuple(e) for e in con.execute("SELECT stamp_ns, level, text FROM events")]
-    except sqlite3.DatabaseError as exc:
-        raise RunError(f"{db}: not a readable mission log: {exc}") from None
-    except TypeError as exc:  # a steps table with other columns
-        raise RunError(f"{db}: steps table does not match the mission log schema: {exc}") from None
-    finally:
-        con.close()
+        data = read_log(db)
+    except MissionLogError as exc:
+        raise RunError(str(exc)) from None
+    if data.mission is None:
+        raise RunError(f"{db}: the mission table is empty")
+    mission, steps, events = dict(data.mission), data.steps, data.events
     plan = None
     text = mission.pop("plan_json")
     if text:
@@ -124,7 +115,7 @@ def find_scan(step: Step, run_dir: Path, scan_dirs: Sequence[Path] = ()) -> Path
 
 def nav_pose(step: Step, place: Placement, has_altitude: bool = True) -> F64:
     """4x4 ``field <- scanner`` from the step's recorded mean pose and inclinometer
-    (paper eq. 1, :func:`.poses.scanner_pose`), base_link corrected for the planar
+    (paper eq. 1, :func:`common.poses.scanner_pose`), base_link corrected for the planar
     antenna lever (see :class:`Placement`). Raises RunError naming the scan."""
     vals = (step.mean_x, step.mean_y, step.mean_yaw, step.pitch, step.roll)
     if any(v is None for v in vals):
@@ -137,31 +128,24 @@ def nav_pose(step: Step, place: Placement, has_altitude: bool = True) -> F64:
         raise RunError(f"scan {step.scan_id}: {exc}") from None
     if place.antenna_height:
         # the antennas sit at R (0, 0, h) from base_link, a planar EKF takes them at
-        # (0, 0, h): its base_link is off by the horizontal part of R e_z * h
-        lean = rot_zyx(roll, pitch, yaw)[:, 2] * place.antenna_height
+        # (0, 0, h): its base_link is off by the horizontal part of R e_z * h. R e_z is
+        # the scanner's z axis too (the mount turns only about z); the compensator's
+        # pitch and roll hold about the scanner's own yaw, not the base's
+        lean = m[:3, 2] * place.antenna_height
         m[:2, 3] -= lean[:2]
     return m
 
 
 def scan_inputs(run: RunData, place: Placement, scan_dirs: Sequence[Path] = ()) -> list[ScanInput]:
-    """A :class:`.pipeline.ScanInput` per done scan, with the simulator's true pose
-    when one was stored beside the scan (evaluation only). Raises RunError."""
+    """A :class:`.pipeline.ScanInput` per done scan: its file and its navigation pose,
+    what a real robot records. Raises RunError."""
     if not run.done:
         raise RunError(f"{run.run_dir / 'mission.db'}: no scan is done in this mission")
-    out = []
-    for s in run.done:
-        path = find_scan(s, run.run_dir, scan_dirs)
-        try:
-            truth = read_truth(path)
-        except ValueError as exc:
-            raise RunError(str(exc)) from None
-        true_pose = None if truth is None else np.asarray(truth.scanner_pose, dtype=np.float64)
-        out.append(
-            ScanInput(
-                path=path,
-                nav_pose=nav_pose(s, place, run.has_altitude),
-                true_pose=true_pose,
-                name=f"scan_{s.scan_id:03d}",
-            )
+    return [
+        ScanInput(
+            path=find_scan(s, run.run_dir, scan_dirs),
+            nav_pose=nav_pose(s, place, run.has_altitude),
+            name=f"scan_{s.scan_id:03d}",
         )
-    return out
+        for s in run.done
+    ]

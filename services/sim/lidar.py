@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.geo import rot_zyx
+from common.robot import LidarMount, default_robot
 from services.sim.robot import RobotState, pose_matrix
 from services.sim.scene import Scene
 
@@ -26,16 +27,13 @@ F64 = npt.NDArray[np.float64]
 class LidarConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Hokuyo UST-05LX (metres, degrees). Field of view, step and range from Hokuyo's
     datasheet (270 deg, 0.25 deg, 0.06-5 m, accuracy +-40 mm, read here as a 2-sigma
-    band: sigma 20 mm). The paper gives no mounting; the default puts the lidar on
-    the Husky's front bumper, 0.35 m above the ground contact plane, facing forward."""
+    band: sigma 20 mm). Where it sits is the robot description's ``[lidar]``."""
 
     fov_deg: Annotated[float, msgspec.Meta(gt=0, le=360)] = 270.0
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.25
     min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.06
     max_range: Annotated[float, msgspec.Meta(gt=0)] = 5.0
     sigma: Annotated[float, msgspec.Meta(ge=0)] = 0.02
-    mount_xyz: tuple[float, float, float] = (0.45, 0.0, 0.35)
-    mount_yaw_deg: float = 0.0
 
 
 def beam_angles(cfg: LidarConfig) -> F64:
@@ -45,22 +43,29 @@ def beam_angles(cfg: LidarConfig) -> F64:
     return out
 
 
-def lidar_pose(state: RobotState, cfg: LidarConfig) -> F64:
-    """4x4 transform field <- lidar."""
+def lidar_pose(state: RobotState, mount: LidarMount) -> F64:
+    """4x4 transform field <- lidar of a lidar at ``mount`` on the robot at ``state``."""
     m = np.eye(4)
-    m[:3, :3] = rot_zyx(0.0, 0.0, math.radians(cfg.mount_yaw_deg))
-    m[:3, 3] = cfg.mount_xyz
+    m[:3, :3] = rot_zyx(0.0, 0.0, mount.yaw_rad)
+    m[:3, 3] = mount.xyz
     out: F64 = pose_matrix(state) @ m
     return out
 
 
-def scan(scene: Scene, state: RobotState, cfg: LidarConfig, rng: np.random.Generator) -> F32:
-    """One sweep from the robot at ``state``: ranges (n_beams,) float32, inf = none."""
+def scan(
+    scene: Scene,
+    state: RobotState,
+    cfg: LidarConfig,
+    rng: np.random.Generator,
+    mount: LidarMount | None = None,
+) -> F32:
+    """One sweep from the robot at ``state`` of a lidar at ``mount`` (default: the
+    shipped robot's): ranges (n_beams,) float32, inf = none."""
     if cfg.max_range <= cfg.min_range:
         raise ValueError(f"lidar max_range={cfg.max_range} <= min_range={cfg.min_range}")
     a = beam_angles(cfg)
     local = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
-    m = lidar_pose(state, cfg)
+    m = lidar_pose(state, mount or default_robot().lidar)
     t, _, _ = scene.cast(m[:3, 3], local @ m[:3, :3].T, cfg.max_range)
     r = t + cfg.sigma * rng.standard_normal(len(t))
     r = np.where(np.isfinite(t) & (r >= cfg.min_range), np.minimum(r, cfg.max_range), np.inf)

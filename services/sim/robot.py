@@ -19,6 +19,8 @@ body moves less than the wheels say:
   soil).
 
 ``soil`` scales every slip term: 1 is firm, tilled soil; 2-3 is loose or rocky ground.
+The wheel geometry and the speed and acceleration limits are the robot description's
+(:mod:`common.robot`); :class:`RobotConfig` holds what only a simulation has.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.geo import rot_zyx, wrap_angle
+from common.robot import Robot, default_robot
 from services.sim.terrain import Terrain
 
 F64 = npt.NDArray[np.float64]
@@ -40,24 +43,11 @@ NonNeg = Annotated[float, msgspec.Meta(ge=0)]
 
 
 class RobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Husky A200 (metres, seconds, radians).
-
-    Dimensions and top speed: the paper (990 x 670 x 390 mm, 1.0 m/s) and Clearpath's
-    Husky datasheet (wheelbase 512 mm, track 555 mm). Acceleration limits: the brief's
-    1 m/s^2 and 2 rad/s^2, below husky_control's defaults (3 m/s^2, 6 rad/s^2) as a
-    loaded robot on soil. Angular speed limit: husky_control's 2 rad/s. The slip and
-    noise figures are assumptions sized to the paper's results (corner XTE of 5-10 cm,
-    heading settling within its 2 deg tolerance), not measurements.
+    """The Husky A200's drivetrain dynamics on soil (metres, seconds, radians). The
+    slip and noise figures are assumptions sized to the paper's results (corner XTE of
+    5-10 cm, heading settling within its 2 deg tolerance), not measurements.
     """
 
-    length: Pos = 0.99
-    width: Pos = 0.67
-    track: Pos = 0.555
-    wheelbase: Pos = 0.512
-    max_v: Pos = 1.0
-    max_w: Pos = 2.0
-    max_accel: Pos = 1.0
-    max_alpha: Pos = 2.0
     # first-order lag of the motor speed loops
     tau: Pos = 0.15
     slip_long: Annotated[float, msgspec.Meta(ge=0, lt=1)] = 0.01
@@ -100,10 +90,11 @@ def _toward(current: float, target: float, max_delta: float) -> float:
     return current + min(max(target - current, -max_delta), max_delta)
 
 
-def settle(state: RobotState, terrain: Terrain, cfg: RobotConfig | None = None) -> RobotState:
-    """``state`` with z, pitch and roll taken from the ground under the four wheels."""
-    cfg = cfg or RobotConfig()
-    hx, hy = cfg.wheelbase / 2, cfg.track / 2
+def settle(state: RobotState, terrain: Terrain, robot: Robot | None = None) -> RobotState:
+    """``state`` with z, pitch and roll taken from the ground under the four wheels
+    (``robot``'s track and wheelbase; default: the shipped robot)."""
+    robot = robot or default_robot()
+    hx, hy = robot.wheelbase / 2, robot.track / 2
     c, s = math.cos(state.yaw), math.sin(state.yaw)
     bx = np.array([hx, hx, -hx, -hx])  # front-left, front-right, rear-left, rear-right
     by = np.array([hy, -hy, hy, -hy])
@@ -111,8 +102,8 @@ def settle(state: RobotState, terrain: Terrain, cfg: RobotConfig | None = None) 
     front, rear = (h[0] + h[1]) / 2, (h[2] + h[3]) / 2
     left, right = (h[0] + h[2]) / 2, (h[1] + h[3]) / 2
     # a rigid chassis on four contacts: the least-squares plane through them
-    pitch = math.atan2(rear - front, cfg.wheelbase)  # nose down is positive (REP-103)
-    roll = math.atan2(left - right, cfg.track)  # left side up is positive
+    pitch = math.atan2(rear - front, robot.wheelbase)  # nose down is positive (REP-103)
+    roll = math.atan2(left - right, robot.track)  # left side up is positive
     return dataclasses.replace(state, z=float(h.mean()), pitch=pitch, roll=roll)
 
 
@@ -125,21 +116,25 @@ def step(
     rng: np.random.Generator,
     cfg: RobotConfig | None = None,
     soil: float = 1.0,
+    robot: Robot | None = None,
 ) -> RobotState:
-    """Advance the robot ``dt`` seconds under the commanded twist (m/s, rad/s).
+    """Advance the robot ``dt`` seconds under the commanded twist (m/s, rad/s), within
+    ``robot``'s limits (default: the shipped robot).
 
     Raises ValueError for a non-positive or non-finite ``dt`` or a negative ``soil``.
     """
     cfg = cfg or RobotConfig()
+    robot = robot or default_robot()
+    lim = robot.limits
     if not (dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a positive number of seconds, got {dt}")
     if not soil >= 0:
         raise ValueError(f"soil factor must be >= 0, got {soil}")
-    tv = min(max(cmd_v if math.isfinite(cmd_v) else 0.0, -cfg.max_v), cfg.max_v)
-    tw = min(max(cmd_w if math.isfinite(cmd_w) else 0.0, -cfg.max_w), cfg.max_w)
+    tv = min(max(cmd_v if math.isfinite(cmd_v) else 0.0, -lim.max_speed), lim.max_speed)
+    tw = min(max(cmd_w if math.isfinite(cmd_w) else 0.0, -lim.max_turn_rate), lim.max_turn_rate)
     k = 1.0 - math.exp(-dt / cfg.tau)
-    vw = _toward(state.v_wheel, state.v_wheel + (tv - state.v_wheel) * k, cfg.max_accel * dt)
-    ww = _toward(state.w_wheel, state.w_wheel + (tw - state.w_wheel) * k, cfg.max_alpha * dt)
+    vw = _toward(state.v_wheel, state.v_wheel + (tv - state.v_wheel) * k, lim.max_accel * dt)
+    ww = _toward(state.w_wheel, state.w_wheel + (tw - state.w_wheel) * k, lim.max_turn_accel * dt)
 
     v = vw * (1.0 - min(cfg.slip_long * soil, 0.9))
     eff = max(1.0 - (1.0 - cfg.yaw_efficiency) * soil, 0.05)
@@ -171,7 +166,7 @@ def step(
         w_wheel=ww,
         icr=icr,
     )
-    return settle(moved, terrain, cfg)
+    return settle(moved, terrain, robot)
 
 
 def encoder_twist(

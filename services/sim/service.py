@@ -51,7 +51,7 @@ class SimService:
         self.ctx, self.cfg = ctx, cfg
         layout, fld = load_field(ctx.field)
         ctx.log.info("world: field %s (%s), %d plots", fld.name, ctx.field, fld.n_plots)
-        self.world = World(layout, fld, cfg.world)
+        self.world = World(layout, fld, cfg.world, ctx.robot)
         ctx.log.info(
             "world: %d sphere targets, %s", len(self.world.sphere_centres), self.world.placement
         )
@@ -62,7 +62,7 @@ class SimService:
         self.sim_ns = 0
         self.faults = FaultSchedule(cfg.faults)
         self.snap_path = snapshot.snapshot_path(ctx.run_dir)
-        self.world_id = snapshot.fingerprint(layout, fld, cfg.world)
+        self.world_id = snapshot.fingerprint(layout, fld, cfg.world, ctx.robot)
         if cfg.resume:
             self._resume()
         self._lock = threading.Lock()  # held while stepping or rendering
@@ -135,8 +135,12 @@ class SimService:
             settings = msgspec.structs.replace(self.cfg.scan, step_deg=req.step_deg)
             scan = self.world.render_scan(pose, settings, self.rng)
             sd = math.radians(self.cfg.inclinometer_sd_deg)
-            pitch = self.state.pitch + float(self.rng.normal(0.0, sd))
-            roll = self.state.roll + float(self.rng.normal(0.0, sd))
+            # the compensator measures the scanner's tilt: the base's, turned by the
+            # mount's yaw (ZYX: pitch from r20, roll from r21 and r22)
+            true_pitch = -math.asin(min(1.0, max(-1.0, float(pose[2, 0]))))
+            true_roll = math.atan2(float(pose[2, 1]), float(pose[2, 2]))
+            pitch = true_pitch + float(self.rng.normal(0.0, sd))
+            roll = true_roll + float(self.rng.normal(0.0, sd))
             path.parent.mkdir(parents=True, exist_ok=True)
             write_e57(path, scan.points, scan.intensity, name=path.stem)
             st = self.state

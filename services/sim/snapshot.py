@@ -32,6 +32,7 @@ import msgspec
 import numpy as np
 
 from common.field import Field, FieldLayout
+from common.robot import Robot, default_robot
 from services.sim.robot import RobotState
 from services.sim.storage import write_atomic
 from services.sim.world import WorldConfig
@@ -82,11 +83,15 @@ def deployment_id() -> str:
     return f"{ppid}@{started}"
 
 
-def fingerprint(layout: FieldLayout, field: Field, cfg: WorldConfig) -> str:
-    """Identifies one world: the same field (layout and plot boxes) and world config."""
+def fingerprint(
+    layout: FieldLayout, field: Field, cfg: WorldConfig, robot: Robot | None = None
+) -> str:
+    """Identifies one world: the same field (layout and plot boxes), world config and
+    robot description (default: the shipped one)."""
     h = hashlib.sha256(msgspec.json.encode(layout))
     h.update(np.ascontiguousarray(field.plot_boxes).tobytes())
     h.update(msgspec.json.encode(cfg))
+    h.update(msgspec.json.encode(robot or default_robot()))
     return h.hexdigest()[:32]
 
 

@@ -23,7 +23,7 @@ at least ``min_points`` points (greedy, then swaps until no single swap helps).
 A 1 m scanner in a lane sees only the plus-shaped lanes through it, so one sphere
 serves at most two scans that stand in different alleys; with five spheres no
 placement can give every scan of a diagonal layout two spheres (see
-README.md, "Registration" for what the ENGR plan gets).
+docs/simulation.md, "The world").
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Ground truth of a simulated scan, written next to its E57 for evaluation only.
 
 The simulator knows where the scanner really stood; a real scanner does not, so this
-file exists only in simulation and only scoring code (``phenorover register``'s
-"error against truth") reads it. Nothing that places or registers scans may use it.
+file exists only in simulation. The simulator writes it (this module: its schema and
+writer); only the evaluation reads it (``phenorover/eval/register/truth.py``, behind
+``phenorover eval register``). Nothing that places or registers scans may use it.
 ``<scan>.e57`` gets ``<scan>.truth.json``.
 """
 
@@ -39,15 +40,3 @@ def truth_path(scan: str | Path) -> Path:
 def write_truth(scan: str | Path, truth: ScanTruth) -> None:
     """Write the truth beside ``scan``, whole or not at all (temporary name, renamed)."""
     write_atomic(truth_path(scan), msgspec.json.encode(truth))
-
-
-def read_truth(scan: str | Path) -> ScanTruth | None:
-    """The truth of ``scan``, None when there is none (a real scan); raises ValueError
-    naming the file when it is malformed."""
-    path = truth_path(scan)
-    if not path.exists():
-        return None
-    try:
-        return msgspec.json.decode(path.read_bytes(), type=ScanTruth)
-    except (OSError, msgspec.DecodeError) as exc:
-        raise ValueError(f"{path}: {exc}") from None

@@ -16,6 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from common.field import Field, FieldLayout
+from common.geo import rot_zyx
+from common.robot import Robot, default_robot
 from services.sim import lidar as lidar_mod
 from services.sim import robot as robot_mod
 from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
@@ -34,9 +36,6 @@ from services.sim.terrain import Terrain, TerrainConfig, build_terrain
 F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 Pos = Annotated[float, msgspec.Meta(gt=0)]
-
-# base_link positions of the two GNSS antennas (m): 0.95 m apart along x, 1.10 m up
-GNSS_ANTENNAS = ((-0.475, 0.0, 1.10), (0.475, 0.0, 1.10))
 
 
 class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
@@ -67,8 +66,8 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """Everything that shapes the world. ``seed`` seeds terrain, plants and target
     heights (sensor noise takes the caller's generator). ``soil``: traction factor of
     the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky (the paper's
-    southern paths). ``scanner_mount``: the FARO optical centre in base_link (m); the
-    1.0 m height is the planner's assumption (``ScannerModel.height``)."""
+    southern paths). Where the robot's sensors sit is the robot description's, not
+    the world's (:class:`World`)."""
 
     seed: int = 0
     terrain: TerrainConfig = TerrainConfig()
@@ -79,7 +78,6 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     robot: RobotConfig = RobotConfig()
     scanner_noise: FaroNoise = FaroNoise()
     lidar: lidar_mod.LidarConfig = lidar_mod.LidarConfig()
-    scanner_mount: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
 
 def _obstacle_arrays(obstacles: list[Obstacle], terrain: Terrain) -> tuple[F64, F64]:
@@ -98,11 +96,19 @@ def _obstacle_arrays(obstacles: list[Obstacle], terrain: Terrain) -> tuple[F64, 
 
 class World:
     """Terrain, foliage, targets and obstacles of one field, built deterministically
-    from ``(layout, field, cfg)``."""
+    from ``(layout, field, cfg)``, and the ``robot`` in it (its description: where its
+    antennas, scanner and lidar sit, its wheels and limits; default: the shipped one)."""
 
-    def __init__(self, layout: FieldLayout, field: Field, cfg: WorldConfig | None = None) -> None:
+    def __init__(
+        self,
+        layout: FieldLayout,
+        field: Field,
+        cfg: WorldConfig | None = None,
+        robot: Robot | None = None,
+    ) -> None:
         self.layout, self.field = layout, field
         self.cfg = cfg = cfg or WorldConfig()
+        self.robot = robot or default_robot()
         self.terrain: Terrain = build_terrain(field.bounds, cfg.terrain, cfg.seed)
         self.foliage: Foliage = build_foliage(field.plot_boxes, self.terrain, cfg.foliage, cfg.seed)
         ob_boxes, ob_cyls = _obstacle_arrays(cfg.obstacles, self.terrain)
@@ -177,14 +183,14 @@ class World:
 
     def settle(self, state: RobotState) -> RobotState:
         """``state`` placed on the ground (z, pitch, roll from the terrain)."""
-        return robot_mod.settle(state, self.terrain, self.cfg.robot)
+        return robot_mod.settle(state, self.terrain, self.robot)
 
     def step_robot(
         self, state: RobotState, cmd_v: float, cmd_w: float, dt: float, rng: np.random.Generator
     ) -> RobotState:
         """Advance the robot under a commanded twist (see :func:`robot.step`)."""
         return robot_mod.step(
-            state, cmd_v, cmd_w, dt, self.terrain, rng, self.cfg.robot, self.cfg.soil
+            state, cmd_v, cmd_w, dt, self.terrain, rng, self.cfg.robot, self.cfg.soil, self.robot
         )
 
     def encoder_twist(self, state: RobotState, rng: np.random.Generator) -> tuple[float, float]:
@@ -193,12 +199,15 @@ class World:
 
     def gnss_truth(self, state: RobotState) -> F64:
         """True field-frame positions (2, 3) of the two GNSS antenna phase centres."""
-        return robot_mod.body_to_field(state, np.array(GNSS_ANTENNAS))
+        return robot_mod.body_to_field(state, np.array([a.xyz for a in self.robot.antennas]))
 
     def scanner_pose(self, state: RobotState) -> F64:
-        """4x4 field <- scanner of the FARO on the robot at ``state``."""
+        """4x4 field <- scanner of the FARO on the robot at ``state`` (its zero azimuth
+        turned by the mount's yaw from base_link x)."""
+        mount = self.robot.scanner
         m = robot_mod.pose_matrix(state)
-        m[:3, 3] = robot_mod.body_to_field(state, np.array(self.cfg.scanner_mount))
+        m[:3, :3] = m[:3, :3] @ rot_zyx(0.0, 0.0, mount.yaw_rad)
+        m[:3, 3] = robot_mod.body_to_field(state, np.array(mount.xyz))
         return m
 
     def render_scan(self, pose: F64, settings: ScanSettings, rng: np.random.Generator) -> Scan:
@@ -223,7 +232,7 @@ class World:
                 boxes=np.vstack([scene.boxes, boxes]),
                 cylinders=np.vstack([scene.cylinders, cyls]),
             )
-        return lidar_mod.scan(scene, state, self.cfg.lidar, rng)
+        return lidar_mod.scan(scene, state, self.cfg.lidar, rng, self.robot.lidar)
 
     def truth_points(self, spacing: float = 0.05) -> tuple[F64, U8]:
         """A dense, deterministic sample of every surface (field frame, m) with labels:

@@ -15,8 +15,9 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages.nav import PoseEstimate
-from services.register.io import RegisteredIOError, read_registered_e57
-from services.register.poses import F64, apply, scanner_pose
+from common.pointcloud import CloudIOError, read_e57
+from common.poses import F64, apply, scanner_pose
+from common.robot import ScannerMount
 
 
 class CloudError(ValueError):
@@ -42,22 +43,22 @@ def scan_in_field(
     pose: PoseEstimate,
     pitch: float,
     roll: float,
-    height: float,
+    mount: ScannerMount,
     n: int,
 ) -> F64:
     """The first scan of E57 ``path`` (points in the scanner frame), subsampled to
     ``n`` points and placed in the field frame with the navigation pose and the
-    inclinometer's pitch and roll (paper eq. 1, lever ``height`` m straight up)."""
+    inclinometer's pitch and roll (paper eq. 1, the scanner at ``mount`` on the robot)."""
     try:
-        scans = read_registered_e57(path)
-    except RegisteredIOError as exc:
+        scans = read_e57(path)
+    except CloudIOError as exc:
         raise CloudError(str(exc)) from None
     if not scans:
         raise CloudError(f"{path}: no scan in the file")
     vals = (pose.x, pose.y, pose.z, pose.yaw, pitch, roll)
     if not all(math.isfinite(v) for v in vals):
         raise CloudError(f"{path}: the pose to place it at is not finite: {vals}")
-    m = scanner_pose(pose.x, pose.y, pose.z, pose.yaw, pitch, roll, lever=(0.0, 0.0, height))
+    m = scanner_pose(pose.x, pose.y, pose.z, pose.yaw, pitch, roll, mount.xyz, mount.yaw_rad)
     return apply(m, subsample(_finite(scans[0].points), n))
 
 
@@ -75,8 +76,8 @@ def registered(path: str | Path, n: int) -> F64:
         pts = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
         return subsample(_finite(pts.astype(np.float64)), n)
     try:
-        scans = read_registered_e57(p)
-    except RegisteredIOError as exc:
+        scans = read_e57(p)
+    except CloudIOError as exc:
         raise CloudError(str(exc)) from None
     if not scans:
         raise CloudError(f"{p}: no scan in the file")

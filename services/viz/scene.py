@@ -33,14 +33,12 @@ from common.messages.mission import MissionEvent, MissionState
 from common.messages.nav import NavProgress
 from common.messages.plan import PlanResult
 from common.messages.scan import ScannerStatus
+from common.robot import LidarMount, Robot
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 U8 = npt.NDArray[np.uint8]
 
-# Husky A200 body, metres (half sizes); the box sits on the ground under base_link
-BODY_HALF = (0.495, 0.335, 0.19)
-LIDAR_Z = 0.3  # height of the 2D lidar's plane above the ground, for display only
 ROUTE_Z = 0.02  # lines drawn just above the ground so the terrain does not hide them
 
 GREY = (150, 150, 150)
@@ -91,21 +89,22 @@ def blueprint() -> Any:
     )
 
 
-def world() -> list[Entry]:
-    """What never changes: the up axis and the two robot bodies."""
-    centre = [[0.0, 0.0, BODY_HALF[2]]]
+def world(robot: Robot) -> list[Entry]:
+    """What never changes: the up axis and the two robot bodies (``robot``'s
+    footprint, standing on the ground under base_link)."""
+    fp = robot.footprint
+    half = (fp.length / 2, fp.width / 2, fp.height / 2)
+    centre = [[0.0, 0.0, half[2]]]
     return [
         Entry("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True),
         Entry(
             "robot/estimate/body",
-            rr.Boxes3D(half_sizes=[BODY_HALF], centers=centre, colors=[BLUE]),
+            rr.Boxes3D(half_sizes=[half], centers=centre, colors=[BLUE]),
             static=True,
         ),
         Entry(
             "robot/truth/body",
-            rr.Boxes3D(
-                half_sizes=[BODY_HALF], centers=centre, colors=[(*GREY, 90)], fill_mode="solid"
-            ),
+            rr.Boxes3D(half_sizes=[half], centers=centre, colors=[(*GREY, 90)], fill_mode="solid"),
             static=True,
         ),
     ]
@@ -237,13 +236,18 @@ def heading_entry(h: GnssHeading, x: float, y: float) -> Entry:
     )
 
 
-def lidar_entry(scan: LaserScan) -> Entry:
-    """The planar scan's returns in base_link (below ``robot/estimate``)."""
+def lidar_entry(scan: LaserScan, mount: LidarMount) -> Entry:
+    """The planar scan's returns in base_link (below ``robot/estimate``), from a lidar
+    at ``mount``."""
     r = np.asarray(scan.ranges.numpy(), dtype=np.float64).ravel()
-    a = scan.angle_min + scan.angle_increment * np.arange(len(r))
+    a = mount.yaw_rad + scan.angle_min + scan.angle_increment * np.arange(len(r))
     ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
     xyz = np.column_stack(
-        [r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok]), np.full(ok.sum(), LIDAR_Z)]
+        [
+            mount.x + r[ok] * np.cos(a[ok]),
+            mount.y + r[ok] * np.sin(a[ok]),
+            np.full(ok.sum(), mount.z),
+        ]
     )
     return Entry("robot/estimate/lidar", rr.Points3D(xyz, colors=[RED], radii=[0.02]))
 

@@ -80,7 +80,7 @@ class VizService:
         self.ctx, self.cfg, self.log = ctx, cfg, ctx.log
         self.out = Outputs(cfg, ctx.run_dir, isinstance(ctx.clock, SimClock))
         self.frame = self._frame_of_field(ctx.field)
-        self.static: dict[str, scene.Entry] = {e.path: e for e in scene.world()}
+        self.static: dict[str, scene.Entry] = {e.path: e for e in scene.world(ctx.robot)}
         self.trail = scene.Trail(cfg.trail_step_m)
         self.plan: PlanResult | None = None
         self.state: MissionState | None = None
@@ -196,7 +196,7 @@ class VizService:
         elif name == "heading" and self._last_pose is not None:
             log(m.stamp_ns, [scene.heading_entry(m, self._last_pose.x, self._last_pose.y)])
         elif name == "lidar":
-            log(m.stamp_ns, [scene.lidar_entry(m)])
+            log(m.stamp_ns, [scene.lidar_entry(m, self.ctx.robot.lidar)])
         elif name == "scanner":
             log(m.stamp_ns, scene.scanner_entries(self.scanner, m))
             self.scanner = m
@@ -246,11 +246,11 @@ class VizService:
         pose = self._last_pose
         if pose is None:
             raise ValueError(f"scan {st.scan_id} finished before any pose arrived")
-        height = self.plan.scanner.height if self.plan is not None else 1.0
+        mount = self.ctx.robot.scanner
 
         def job() -> None:
             pts = clouds.scan_in_field(
-                st.file, pose, st.pitch, st.roll, height, self.cfg.scan_points
+                st.file, pose, st.pitch, st.roll, mount, self.cfg.scan_points
             )
             self.out.log(st.stamp_ns, [scene.cloud_entry(f"clouds/scan_{st.scan_id:03d}", pts)])
 

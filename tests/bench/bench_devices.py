@@ -2,24 +2,32 @@
 the whole receiver path (RTK error model -> NMEA GST/GGA -> parser -> fixes ->
 compass), and the time per simulated FARO scan of ENGR at 0.36 deg.
 
-Prints the error models beside the results. Report, never assert.
+Prints the error models beside the results and writes them through
+phenorover.eval.results. Report, never assert; a part that fails makes it exit 1.
     python tests/bench/bench_devices.py [--json OUT] [--minutes 10]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
+import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from common.field import load_field
 from common.field_geojson import field_frame
 from common.geo import wrap_angle
-from services.gnss.compass import CompassConfig
+from common.robot import default_robot
+from phenorover.eval.error_models import compass, faro, rtk
+from phenorover.eval.results import Bench
+from services.gnss.compass import Compass
 from services.gnss.nmea import Gga, Gst, parse_sentence
 from services.gnss.receiver import receiver_output
 from services.gnss.rtk_model import RtkErrorModel, RtkModelConfig
@@ -28,7 +36,7 @@ from services.planner.core import plan
 from services.sim.render import ScanSettings, read_e57, write_e57
 from services.sim.robot import RobotState
 from services.sim.scene import LABEL_NAMES
-from services.sim.world import World
+from services.sim.world import World, WorldConfig
 
 
 def compass_drive(minutes: float, seed: int = 7) -> dict[str, float]:
@@ -39,7 +47,7 @@ def compass_drive(minutes: float, seed: int = 7) -> dict[str, float]:
     rng = np.random.default_rng(seed)
     models = {a: RtkErrorModel(rtk, np.random.default_rng([seed, a])) for a in (1, 2)}
     builders = {a: FixBuilder(a, {"FIX": 0.014, "FLOAT": 0.25, "SINGLE": 1.2}) for a in (1, 2)}
-    cfg = CompassConfig()
+    cfg = Compass.of(default_robot())
     s = world.settle(RobotState(x=28.5, y=1.0, yaw=math.pi))
     dt, n = 0.02, int(minutes * 60 / 0.02)
     errs, valid, total = [], 0, 0
@@ -129,12 +137,74 @@ def settings_rays(s: ScanSettings) -> float:
     )
 
 
-def main() -> None:
+def record_compass(bench: Bench, c: dict[str, float] | None, missing: str = "") -> None:
+    """The compass figures; ``c`` None: not measured, ``missing`` says why."""
+    models = {**rtk(RtkModelConfig()), **compass(Compass.of(default_robot())), "seed": "7"}
+
+    def fig(name: str, key: str, unit: str, scale: float = 1.0, **kw: Any) -> None:
+        v = None if c is None or key not in c else scale * c[key]
+        bench.figure(f"GNSS compass: {name}", v, unit, error_models=models, missing=missing, **kw)
+
+    predicted = "" if c is None else f"the error model predicts {c['predicted_sd_deg']:.2f} deg"
+    fig("heading error SD against the true heading", "sd_deg", "deg", headline=True, note=predicted)
+    fig("heading error mean", "mean_deg", "deg")
+    fig("heading error RMS", "rms_deg", "deg")
+    fig("heading error, 95 % below", "p95_abs_deg", "deg")
+    fig("epochs with a valid heading (both antennas fixed)", "valid_share", "%", scale=100)
+
+
+def record_scans(bench: Bench, s: dict[str, Any] | None, missing: str = "") -> None:
+    """The FARO scan figures; ``s`` None: not measured, ``missing`` says why."""
+    w = WorldConfig()
+    models = faro(w.scanner_noise, 0.015)
+    for name, key, unit in (
+        ("time per scan of ENGR at 0.36 deg, incl. writing the E57", "mean_scan_s", "s"),
+        ("first scan, incl. compilation", "first_scan_s", "s"),
+        ("points per scan", "mean_points", ""),
+    ):
+        v = None if s is None or key not in s else float(s[key])
+        bench.figure(
+            f"simulated FARO: {name}",
+            v,
+            unit,
+            error_models=models,
+            missing=missing,
+            headline=key == "mean_scan_s",
+        )
+
+
+def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--minutes", type=float, default=10.0)
     args = ap.parse_args()
-    c = compass_drive(args.minutes)
+    bench = Bench("bench_devices")
+    details: dict[str, Any] = {}
+    try:
+        c = compass_drive(args.minutes)
+    except Exception as exc:  # its figures say not measured; the exit status fails
+        why = f"{type(exc).__name__}: {exc}"
+        bench.fail("compass", why)
+        record_compass(bench, None, why)
+    else:
+        details["compass"] = c
+        record_compass(bench, c)
+        print_compass(c)
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            s = scan_timing(Path(d))
+    except Exception as exc:
+        why = f"{type(exc).__name__}: {exc}"
+        bench.fail("scans", why)
+        record_scans(bench, None, why)
+    else:
+        details["scans"] = s
+        record_scans(bench, s)
+        print_scans(s)
+    return bench.finish(args.json, details)
+
+
+def print_compass(c: dict[str, float]) -> None:
     print(
         f"GNSS compass over {c['minutes']:.0f} min of driving ({c['epochs']} epochs at 10 Hz, "
         f"{100 * c['valid_share']:.1f} % valid):"
@@ -149,10 +219,9 @@ def main() -> None:
         f", Gauss-Markov {c['model_corr_s']:.0f} s; baseline {c['compass_baseline_m']:.2f} m;"
         f" predicted SD {c['predicted_sd_deg']:.2f} deg"
     )
-    import tempfile
 
-    with tempfile.TemporaryDirectory() as d:
-        s = scan_timing(Path(d))
+
+def print_scans(s: dict[str, Any]) -> None:
     print(
         f"FARO scans of ENGR at 0.36 deg ({s['rays_per_scan']:,} rays), {s['scans']} plan "
         f"locations: first {s['first_scan_s']:.2f} s (incl. compilation), then "
@@ -163,9 +232,7 @@ def main() -> None:
         "  points by surface (all scans): "
         + ", ".join(f"{k[7:]} {v:,}" for k, v in s.items() if k.startswith("points_"))
     )
-    if args.json:
-        args.json.write_text(json.dumps({"compass": c, "scans": s}, indent=1))
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -1,8 +1,14 @@
 """Navigation benchmark: the paper's three experiments (``phenorover nav-test``) on the
-simulated ENGR field with the default error models; figures are reported, never
-asserted. Targets: border mean cross-track <= 2.0 cm and >= 90 % below 5 cm;
-serpentine mean <= 3.0 cm; stationary mean distance to the planned point <= 0.5 cm
-and heading error <= 0.1 deg.
+simulated ENGR field with the default error models. Figures are reported, never
+asserted, through phenorover.eval.results; an experiment that fails makes it exit 1.
+
+In simulation the headline is the true figure. Border and serpentine: the true pose's
+cross-track error against the leg being followed (targets: border mean <= 2.0 cm and
+>= 90 % below 5 cm; serpentine mean <= 3.0 cm). Stationary: where the robot truly
+stands against the planned point and heading (targets <= 0.5 cm and <= 0.1 deg); the
+paper's metric, the estimate against the plan, is reported beside it with no target,
+since the fine positioning creeps until the estimate is within its own 3 mm tolerance.
+Distances driven are measured (the true path), beside the planned route's length.
 
     python tests/bench/bench_nav.py [--json OUT] [--rtf 10]
 """
@@ -11,47 +17,168 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from common.config import ConfigError
+from phenorover.eval.error_models import from_manifest
+from phenorover.eval.results import Bench, Goal
+
+REPO = Path(__file__).resolve().parents[2]
+EXPERIMENTS = ("border", "serpentine", "stationary")
+TILT = (
+    "an IMU's roll and pitch in the filter (the Husky's optional UM7): the planar EKF puts "
+    "base_link where the antennas, 1.1 m above the wheels, lean on the tilted ground (2-3 cm "
+    "downhill at about 1.5 deg); registration removes the lean afterwards with the "
+    "scanner's inclinometer"
+)
+GOALS = {
+    "border_xte": Goal(
+        "<=",
+        2.0,
+        "the error sits at the corners: trim the heading after each in-place "
+        "turn and join the next leg more slowly (the skid-steer turn shifts the robot sideways)",
+    ),
+    "border_below": Goal(
+        ">=", 90.0, "as for the mean: the share above 5 cm is the corners' sideways shift"
+    ),
+    "serpentine_xte": Goal(
+        "<=", 3.0, "as for the border: the corners; and fewer RTK-float spells unaided"
+    ),
+    "stop": Goal("<=", 0.5, TILT),
+    "heading": Goal(
+        "<=",
+        0.1,
+        "re-trim the heading during the hold, or settle longer before the "
+        "first trim: the filter, averaging the compass, finds the heading further round "
+        "over the following minutes",
+    ),
+}
+BY_CONSTRUCTION = "no target: near the fine positioning's own 3 mm tolerance by construction"
+
+
+def run_experiment(exp: str, rtf: float, out: Path) -> tuple[dict[str, Any] | None, str]:
+    """The experiment's stats.json, or None and why it failed."""
+    cmd = [sys.executable, "-m", "phenorover", "--log-level", "warning", "nav-test", exp]
+    r = subprocess.run(
+        [*cmd, "--rtf", str(rtf), "--out", str(out)], capture_output=True, text=True, cwd=REPO
+    )
+    stats = out / "stats.json"
+    if r.returncode != 0 or not stats.exists():
+        last = (r.stderr.strip() or r.stdout.strip() or "no output").splitlines()[-1]
+        return None, f"nav-test {exp} exited {r.returncode}: {last[:300]}"
+    data: dict[str, Any] = json.loads(stats.read_text())
+    if data.get("result", "arrived") != "arrived":
+        return data, f"the route ended {data['result']}, not arrived"
+    return data, ""
+
+
+def models(out: Path) -> dict[str, str]:
+    """The error models of the experiment's effective manifest (deploy/sim.toml's when
+    the experiment wrote none)."""
+    try:
+        return from_manifest(out / "manifest.toml")
+    except (ConfigError, OSError):
+        return from_manifest(REPO / "deploy" / "sim.toml")
+
+
+def record(bench: Bench, exp: str, s: dict[str, Any] | None, why: str) -> None:
+    """The experiment's figures; with ``why`` (it failed) every one is unmeasured."""
+
+    def get(*path: str, scale: float = 1.0) -> float | None:
+        v: Any = s
+        for k in path:
+            v = v.get(k) if isinstance(v, dict) else None
+        return None if why or not isinstance(v, int | float) else scale * v
+
+    def fig(name: str, value: float | None, unit: str, **kw: Any) -> None:
+        bench.figure(f"{exp}: {name}", value, unit, missing=why or "not in stats.json", **kw)
+
+    if exp in ("border", "serpentine"):
+        fig(
+            "mean cross-track error, true pose against the leg",
+            get("xte_mean_cm"),
+            "cm",
+            goal=GOALS[f"{exp}_xte"],
+            headline=True,
+            paper=2.37 if exp == "border" else 3.67,
+        )
+        below = {"goal": GOALS["border_below"], "headline": True, "paper": 86.0}
+        fig(
+            "share of the path below 5 cm",
+            get("share_below_5cm", scale=100),
+            "%",
+            **(below if exp == "border" else {}),
+        )
+        fig("share of the path above 10 cm", get("share_above_10cm", scale=100), "%")
+        fig("max cross-track error", get("xte_max_cm"), "cm")
+        fig("heading error SD, true pose against the leg", get("heading_sd_deg"), "deg")
+        fig("distance driven, the true path", get("driven_true_m"), "m")
+        fig("route length, planned", get("planned_route_m"), "m", note="planned, not measured")
+        return
+    fig(
+        "true stop against the planned point, mean distance over the hold",
+        get("true_stop_to_planned_cm"),
+        "cm",
+        goal=GOALS["stop"],
+        headline=True,
+    )
+    fig(
+        "estimate against the planned point, mean distance (the paper's metric)",
+        get("paper_estimate_to_planned_cm"),
+        "cm",
+        note=BY_CONSTRUCTION + "; paper 0.57 / 0.38 cm",
+    )
+    fig(
+        "true heading against the planned heading, mean magnitude",
+        get("true_heading_to_planned_deg"),
+        "deg",
+        goal=GOALS["heading"],
+        headline=True,
+    )
+    fig(
+        "estimate's heading residual about the held heading, mean magnitude (the paper's metric)",
+        get("paper_heading_residual_deg"),
+        "deg",
+        paper=0.035,
+    )
+    ex, ey = get("estimate_error_cm", "x"), get("estimate_error_cm", "y")
+    fig(
+        "estimate against the truth, horizontal (mean over the hold)",
+        None if ex is None or ey is None else math.hypot(ex, ey),
+        "cm",
+        note="the antennas' lean on tilted ground, which a planar EKF cannot see",
+    )
+    fig("estimate against the truth, vertical", get("estimate_error_cm", "z"), "cm")
+    fig("estimate's position residual SD, x", get("estimate", "residual_x_sd_cm"), "cm")
+    fig("estimate's position residual SD, y", get("estimate", "residual_y_sd_cm"), "cm")
+    fig("time held", get("hold_s"), "s")
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--rtf", type=float, default=10.0)
     args = ap.parse_args()
-    results = {}
+    bench = Bench("bench_nav")
+    details: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as d:
-        for exp in ("border", "serpentine", "stationary"):
+        for exp in EXPERIMENTS:
             out = Path(d) / exp
-            r = subprocess.run(
-                [
-                    sys.executable,
-                    "-m",
-                    "phenorover",
-                    "--log-level",
-                    "warning",
-                    "nav-test",
-                    exp,
-                    "--rtf",
-                    str(args.rtf),
-                    "--out",
-                    str(out),
-                ],
-                capture_output=True,
-                text=True,
-            )
-            if r.returncode != 0 or not (out / "stats.json").exists():
-                print(f"{exp}: failed: {r.stderr.strip().splitlines()[-1:]}")
-                results[exp] = {"failed": True}
-                continue
-            results[exp] = json.loads((out / "stats.json").read_text())
-            print(f"{exp}: {json.dumps(results[exp])}")
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=1))
-    return 0
+            stats, why = run_experiment(exp, args.rtf, out)
+            print(f"{exp}: {why or json.dumps(stats)}", flush=True)
+            if why:
+                bench.fail(exp, why)
+            details[exp] = stats if stats is not None else {"failed": why}
+            bench.error_models = models(out)
+            record(bench, exp, stats, why)
+    return bench.finish(args.json, details)
 
 
 if __name__ == "__main__":

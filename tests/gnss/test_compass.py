@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from common.geo import wrap_angle
 from services.gnss.compass import (
     BaselineMismatch,
-    CompassConfig,
+    Compass,
     CompassError,
     compass_heading,
 )
@@ -97,7 +97,7 @@ def test_pitch_from_heights() -> None:
 
 def test_mounting_offset() -> None:
     # Antennas across the robot (2 on the left): the baseline points at robot +y.
-    cfg = CompassConfig(antenna1_xyz_m=(0.0, -0.475, 1.1), antenna2_xyz_m=(0.0, 0.475, 1.1))
+    cfg = Compass(antenna1_xyz_m=(0.0, -0.475, 1.1), antenna2_xyz_m=(0.0, 0.475, 1.1))
     h = compass_heading([0, 0], [0, L], COV, COV, cfg)
     assert h.yaw_rad == pytest.approx(0.0)
 

@@ -29,9 +29,9 @@ def test_plot_edge_beside_the_lane_is_not_an_obstacle_when_slightly_off() -> Non
         for x, y in edge
     ]
     r = ranges_to(body)
-    assert obstacle_ahead(r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0), 0.495, 0.6, 0.30)
+    assert obstacle_ahead(r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0, 0.0), 0.495, 0.6, 0.30)
     assert not obstacle_on_leg(
-        r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0), pose, (-5.0, 0.0, 10.0, 0.0), 0.495, 0.6, 0.30
+        r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0, 0.0), pose, (-5.0, 0.0, 10.0, 0.0), 0.495, 0.6, 0.30
     )
 
 
@@ -41,7 +41,7 @@ def test_box_in_the_lane_is_an_obstacle() -> None:
         r,
         ANG[0],
         ANG[1] - ANG[0],
-        (0.45, 0.0),
+        (0.45, 0.0, 0.0),
         (0.0, 0.0, 0.0),
         (0.0, 0.0, 10.0, 0.0),
         0.495,

@@ -7,23 +7,17 @@ from scipy.spatial import cKDTree
 
 from common.field import load_field
 from common.geo import rot_zyx
-from services.register.io import (
-    PosedScan,
-    RegisteredIOError,
-    read_registered_e57,
-    write_laz,
-    write_registered_e57,
-)
-from services.register.metrics import cloud_distance, point_stats
-from services.register.poses import (
+from common.pointcloud import CloudIOError, PosedScan, read_e57, write_e57, write_laz
+from common.poses import (
     PoseError,
     apply,
     euler_zyx,
     inv,
-    perturb,
     scanner_pose,
     tilt_from_axis_inclinations,
 )
+from services.register.metrics import cloud_distance, point_stats
+from services.register.poses import perturb
 from services.register.refine import (
     RefineConfig,
     TargetObservation,
@@ -79,7 +73,7 @@ def test_navigation_pose_matches_the_sim_scanner_pose():
     layout, field = load_field("spl")
     world = World(layout, field)
     s = world.settle(RobotState(x=5.0, y=3.0, yaw=0.4))
-    nav = scanner_pose(s.x, s.y, s.z, s.yaw, s.pitch, s.roll, lever=world.cfg.scanner_mount)
+    nav = scanner_pose(s.x, s.y, s.z, s.yaw, s.pitch, s.roll, lever=world.robot.scanner.xyz)
     np.testing.assert_allclose(nav, world.scanner_pose(s), atol=1e-12)
     roll, pitch, yaw = euler_zyx(nav)
     assert (roll, pitch, yaw) == pytest.approx((s.roll, s.pitch, s.yaw))
@@ -219,15 +213,15 @@ def _scans(rng):
 def test_multi_scan_e57_round_trip(tmp_path):
     scans = _scans(np.random.default_rng(6))
     path = tmp_path / "registered.e57"
-    write_registered_e57(path, scans)
-    back = read_registered_e57(path)
+    write_e57(path, scans)
+    back = read_e57(path)
     assert [b.name for b in back] == [s.name for s in scans]
     for a, b in zip(scans, back, strict=True):
         np.testing.assert_allclose(b.pose, a.pose, atol=1e-9)
         np.testing.assert_allclose(b.points, a.points, atol=1e-5)
         np.testing.assert_allclose(b.intensity, a.intensity, atol=1e-6)
-    with pytest.raises(RegisteredIOError, match="no scans"):
-        write_registered_e57(path, [])
+    with pytest.raises(CloudIOError, match="no scans"):
+        write_e57(path, [])
 
 
 def test_laz_written_in_field_and_utm(tmp_path):

@@ -171,7 +171,7 @@ def test_lidar_sees_a_transient_obstacle_and_the_same_noise() -> None:
     clear = w.lidar_scan(state, np.random.default_rng(0))
     box = TransientObstacle(at_s=0, for_s=1, x=3.0, y=0.4, size_x=0.2, size_y=0.6).box()
     seen = w.lidar_scan(state, np.random.default_rng(0), [box])
-    lx = w.cfg.lidar.mount_xyz[0]
+    lx = w.robot.lidar.x
     assert abs(seen[540] - (3.0 - 0.1 - 1.0 - lx)) < 0.1
     assert not abs(clear[540] - seen[540]) < 0.5
     # beams that miss the box read exactly what they read without it

@@ -2,6 +2,7 @@ import math
 
 import numpy as np
 
+from common.robot import default_robot
 from services.sim.lidar import LidarConfig, beam_angles, scan
 from services.sim.robot import RobotState
 from services.sim.scene import OBSTACLE, Scene
@@ -14,7 +15,7 @@ def _scene(boxes):
 
 
 def test_box_two_metres_ahead():
-    lx = CFG.mount_xyz[0]
+    lx = default_robot().lidar.x
     box = [[lx + 2.0, -0.5, -1.0, lx + 2.5, 0.5, 2.0, OBSTACLE]]
     r = scan(_scene(box), RobotState(), CFG, np.random.default_rng(0))
     a = beam_angles(CFG)
@@ -27,7 +28,7 @@ def test_box_two_metres_ahead():
 
 
 def test_rotated_robot_and_range_limit():
-    lx = CFG.mount_xyz[0]
+    lx = default_robot().lidar.x
     box = [[-0.5, lx + 2.0, -1.0, 0.5, lx + 2.5, 2.0, OBSTACLE]]
     r = scan(_scene(box), RobotState(yaw=math.pi / 2), CFG, np.random.default_rng(0))
     assert abs(r[540] - 2.0) < 0.1

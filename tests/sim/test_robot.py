@@ -3,6 +3,7 @@ import math
 import numpy as np
 import pytest
 
+from common.robot import default_robot
 from services.sim.robot import (
     RobotConfig,
     RobotState,
@@ -16,6 +17,7 @@ from services.sim.terrain import TerrainConfig, build_terrain
 BOUNDS = np.array([0.0, 0.0, 30.0, 20.0])
 FLAT = build_terrain(BOUNDS, TerrainConfig(slope_pct=0.0, bump_rms=0.0, margin=5.0), 0)
 CFG = RobotConfig()
+LIM = default_robot().limits
 DT = 0.02
 
 
@@ -30,7 +32,7 @@ def test_straight_driving_respects_speed_limit():
     rng = np.random.default_rng(0)
     states = drive(RobotState(x=2.0, y=10.0), 2.0, 0.0, 6.0, rng)
     vw = np.array([s.v_wheel for s in states])
-    assert vw.max() <= CFG.max_v + 1e-12 and vw[-1] > 0.99 * CFG.max_v
+    assert vw.max() <= LIM.max_speed + 1e-12 and vw[-1] > 0.99 * LIM.max_speed
     end = states[-1]
     dist = end.x - 2.0
     # 1 m/s^2 ramp to 1 m/s, then cruise, minus 1 % slip and the motor lag
@@ -44,9 +46,9 @@ def test_acceleration_limits():
     states += drive(states[-1], -1.0, 2.0, 2.0, rng)[1:]
     vw = np.array([s.v_wheel for s in states])
     ww = np.array([s.w_wheel for s in states])
-    assert np.abs(np.diff(vw)).max() <= CFG.max_accel * DT + 1e-12
-    assert np.abs(np.diff(ww)).max() <= CFG.max_alpha * DT + 1e-12
-    assert np.abs(ww).max() <= CFG.max_w + 1e-12
+    assert np.abs(np.diff(vw)).max() <= LIM.max_accel * DT + 1e-12
+    assert np.abs(np.diff(ww)).max() <= LIM.max_turn_accel * DT + 1e-12
+    assert np.abs(ww).max() <= LIM.max_turn_rate + 1e-12
 
 
 def test_in_place_rotation_under_rotates_and_drifts():
@@ -72,11 +74,11 @@ def test_encoders_are_blind_to_slip():
 
 def test_pitch_and_roll_follow_the_slope():
     ter = build_terrain(BOUNDS, TerrainConfig(slope_pct=5.0, slope_dir_deg=0, bump_rms=0), 0)
-    facing_up = settle(RobotState(x=10.0, y=10.0, yaw=0.0), ter, CFG)
+    facing_up = settle(RobotState(x=10.0, y=10.0, yaw=0.0), ter)
     assert facing_up.pitch == pytest.approx(-math.atan(0.05), abs=1e-9)  # nose up
     assert facing_up.roll == pytest.approx(0.0, abs=1e-9)
     assert facing_up.z == pytest.approx(float(ter.height(10.0, 10.0)), abs=1e-9)
-    across = settle(RobotState(x=10.0, y=10.0, yaw=math.pi / 2), ter, CFG)
+    across = settle(RobotState(x=10.0, y=10.0, yaw=math.pi / 2), ter)
     assert across.roll == pytest.approx(-math.atan(0.05), abs=1e-9)  # right side up
     assert across.pitch == pytest.approx(0.0, abs=1e-9)
 

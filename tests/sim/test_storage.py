@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from common.field import load_field
+from phenorover.eval.register.truth import read_truth
 from services.sim import snapshot
 from services.sim.render import read_e57, write_e57
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, atomic_path, confine, write_atomic
-from services.sim.truth_file import ScanTruth, read_truth, write_truth
+from services.sim.truth_file import ScanTruth, write_truth
 from services.sim.world import WorldConfig
 
 FIELD = "RenderRequest.path"

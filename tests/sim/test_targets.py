@@ -68,7 +68,7 @@ def test_engr_spheres_serve_the_planned_scans_and_stay_off_the_paths(engr):
     assert np.hypot(*(sph[:, None, :2] - stops[None]).transpose(2, 0, 1)).min() >= 1.0 - 1e-9
     pts = expected_points(engr.scene, _origins(engr, xy), engr.sphere_centres, cfg)
     seen = (pts >= cfg.min_points).sum(axis=1)
-    # five spheres cannot reach every scan of this diagonal plan (README.md, "Registration");
+    # five spheres cannot reach every scan of this diagonal plan (docs/simulation.md);
     # the placement gets seven of the eleven two or more, the four in the left
     # headland three each
     assert (seen >= 2).sum() >= 7

@@ -61,7 +61,7 @@ def test_lidar_sees_obstacle_and_plots(spl):
     w = World(layout, field, cfg)
     state = w.settle(RobotState(x=1.0, y=0.4, yaw=0.0))
     r = w.lidar_scan(state, np.random.default_rng(0))
-    lx = w.cfg.lidar.mount_xyz[0]
+    lx = w.robot.lidar.x
     assert abs(r[540] - (3.0 - 0.1 - 1.0 - lx)) < 0.1
     assert np.isfinite(r).sum() > 100
 

@@ -19,8 +19,9 @@ from common.messages.gnss import FixType, NavSatFix
 from common.messages.mission import MissionPhase, MissionState
 from common.messages.nav import PoseEstimate
 from common.messages.plan import PlanResult
+from common.pointcloud import PosedScan, write_laz
+from common.robot import LidarMount, ScannerMount, default_robot
 from services.planner.core import plan as make_plan
-from services.register.io import PosedScan, write_laz
 from services.sim.render import write_e57
 from services.viz import clouds, scene
 from services.viz.config import VizConfig
@@ -29,6 +30,9 @@ from services.viz.service import VizCli
 from tests.conftest import REPO
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
+# a lidar at base_link facing forward, a scanner 1 m straight above it
+AT_BASE_LINK = LidarMount(x=0.0, y=0.0, z=0.3)
+UP_1M = ScannerMount(x=0.0, y=0.0, z=1.0)
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +102,7 @@ def test_lidar_drops_missing_and_out_of_range_returns() -> None:
         range_max=30.0,
         ranges=Array.of(r),
     )
-    pts = np.asarray(scene.lidar_entry(scan).item.positions.pa_array.to_pylist())
+    pts = np.asarray(scene.lidar_entry(scan, AT_BASE_LINK).item.positions.pa_array.to_pylist())
     assert pts[:, :2] == pytest.approx(np.array([[1.0, 0.0], [0.0, -2.0]]), abs=1e-6)
 
 
@@ -108,7 +112,7 @@ def test_a_lidar_array_that_lies_about_its_size_raises() -> None:
         angle_min=0, angle_max=1, angle_increment=0.1, range_min=0, range_max=1, ranges=bad
     )
     with pytest.raises(ValueError, match="needs 40 bytes"):
-        scene.lidar_entry(scan)
+        scene.lidar_entry(scan, AT_BASE_LINK)
 
 
 def test_a_fix_at_the_field_origin_is_drawn_at_zero(tiny_plan: PlanResult) -> None:
@@ -139,14 +143,14 @@ def test_a_scan_is_placed_at_its_navigation_pose(tmp_path: Path) -> None:
     f = tmp_path / "scan.e57"
     write_e57(f, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), np.ones(2))
     pose = PoseEstimate(x=2.0, y=3.0, yaw=math.pi / 2, z=0.1)
-    pts = clouds.scan_in_field(f, pose, pitch=0.0, roll=0.0, height=1.0, n=10)
+    pts = clouds.scan_in_field(f, pose, pitch=0.0, roll=0.0, mount=UP_1M, n=10)
     assert pts == pytest.approx(np.array([[2.0, 3.0, 1.1], [2.0, 4.0, 1.1]]), abs=1e-5)
 
 
 def test_an_unreadable_scan_file_is_one_clear_error(tmp_path: Path) -> None:
     (tmp_path / "bad.e57").write_bytes(b"not e57")
     with pytest.raises(clouds.CloudError, match=r"bad\.e57"):
-        clouds.scan_in_field(tmp_path / "bad.e57", PoseEstimate(x=0, y=0, yaw=0), 0, 0, 1.0, 5)
+        clouds.scan_in_field(tmp_path / "bad.e57", PoseEstimate(x=0, y=0, yaw=0), 0, 0, UP_1M, 5)
 
 
 def test_registered_laz_is_read_in_the_field_frame_and_subsampled(tmp_path: Path) -> None:
@@ -194,7 +198,7 @@ def test_archetypes_log_to_a_recording(tiny_plan: PlanResult, tmp_path: Path) ->
     """Everything the scene makes is something rerun accepts (strict mode raises)."""
     rec = rr.RecordingStream("phenorover-test")
     rec.save(tmp_path / "t.rrd")
-    entries = [*scene.world(), *scene.plan_entries(tiny_plan)]
+    entries = [*scene.world(default_robot()), *scene.plan_entries(tiny_plan)]
     entries.append(scene.pose("robot/estimate", 1.0, 2.0, 0.0, 0.5))
     rr.set_strict_mode(True)
     try:

@@ -97,6 +97,13 @@ def track_stats(xte: F64, herr: F64) -> dict[str, float]:
     }
 
 
+def path_length(xy: F64) -> float:
+    """Length (m) of the polyline through the (N, 2) points ``xy``; 0 for fewer than 2."""
+    if len(xy) < 2:
+        return 0.0
+    return float(np.hypot(*np.diff(xy, axis=0).T).sum())
+
+
 def stationary_stats(xy: F64, yaw: F64, goal: tuple[float, float, float]) -> dict[str, float]:
     """Residuals of poses held at a scan location against their mean and against the
     planned point ``goal`` (x, y, yaw)."""

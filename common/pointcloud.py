@@ -1,6 +1,7 @@
-"""Registered outputs: one multi-scan E57 and a merged LAZ.
+"""Point cloud files: multi-scan E57 with poses, and merged LAZ (pye57, laspy), for
+registration (which writes them) and the dashboard (which reads them).
 
-The E57 keeps every scan as its own data3D entry, points in the scanner frame
+An E57 keeps every scan as its own data3D entry, points in the scanner frame
 (as measured) with the registration's pose as the scan's E57 pose (rotation
 quaternion w, x, y, z and translation, ``field <- scanner``): CloudCompare and FARO
 SCENE apply the pose on import, so the scans open registered and can still be
@@ -23,15 +24,15 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from services.register.poses import F64, apply, check_pose
+from common.poses import F64, apply, check_pose
 
 F32 = npt.NDArray[np.float32]
 # (x, y, z) field -> (east, north, up) UTM, arrays in and out
 UtmFn = Callable[[F64, F64, F64], tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]]
 
 
-class RegisteredIOError(ValueError):
-    """An output or input file that cannot be written or read as asked."""
+class CloudIOError(ValueError):
+    """A point cloud file that cannot be written or read as asked (one line naming it)."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -45,21 +46,21 @@ class PosedScan:
     name: str
 
 
-def write_registered_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
-    """Write all ``scans`` to one E57 file, each with its pose. Raises
-    RegisteredIOError naming the scan with bad data."""
+def write_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
+    """Write all ``scans`` to one E57 file, each with its pose (one data3D entry per
+    scan). Raises CloudIOError naming the scan with bad data."""
     import pye57
 
     if not scans:
-        raise RegisteredIOError(f"{path}: no scans to write")
+        raise CloudIOError(f"{path}: no scans to write")
     for s in scans:
         if s.points.ndim != 2 or s.points.shape[1] != 3 or len(s.points) != len(s.intensity):
-            raise RegisteredIOError(
+            raise CloudIOError(
                 f"{path}: scan {s.name!r}: points {s.points.shape} and intensity "
                 f"{s.intensity.shape} do not match"
             )
         if len(s.points) == 0:
-            raise RegisteredIOError(f"{path}: scan {s.name!r} has no points")
+            raise CloudIOError(f"{path}: scan {s.name!r} has no points")
         check_pose(s.pose, f"{path}: scan {s.name!r} pose")
     e57 = pye57.E57(str(path), mode="w")
     try:
@@ -77,15 +78,15 @@ def write_registered_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
         e57.close()
 
 
-def read_registered_e57(path: str | Path) -> list[PosedScan]:
+def read_e57(path: str | Path) -> list[PosedScan]:
     """Every scan of an E57 file with its pose (identity when it has none). Raises
-    RegisteredIOError when the file cannot be read."""
+    CloudIOError when the file cannot be read."""
     import pye57
 
     try:
         e57 = pye57.E57(str(path), mode="r")
     except Exception as exc:  # libE57 raises its own exception types
-        raise RegisteredIOError(f"{path}: cannot read E57: {exc}") from None
+        raise CloudIOError(f"{path}: cannot read E57: {exc}") from None
     out = []
     try:
         for i in range(e57.scan_count):
@@ -131,7 +132,7 @@ def write_laz(
 
     pts, inten, src = voxel_merge(scans, voxel)
     if len(pts) == 0:
-        raise RegisteredIOError(f"{path}: no points to write")
+        raise CloudIOError(f"{path}: no points to write")
     if to_utm is not None:
         e, n, u = to_utm(pts[:, 0], pts[:, 1], pts[:, 2])
         pts = np.column_stack([np.asarray(e), np.asarray(n), np.asarray(u)]).astype(np.float64)

@@ -1,5 +1,6 @@
 """Registration at the end of a mission: ``python -m services.register RUN_DIR`` as a
-child process of the mission service.
+child process of the mission service, and :func:`wait_registration` for a command
+that waits for it.
 
 Why a child process of the mission service: the mission service is the one part of
 a deployment that knows when a survey is done, whatever started it (``phenorover
@@ -8,12 +9,15 @@ runs where the mission log is written. Registration is heavy (tens of seconds of
 both cores), so it runs only once the robot is parked at the Origin, at low CPU
 priority (``nice 10``), and in its own process: a crash or a kill of the
 registration cannot take the mission service down, and it opens the mission log
-read-only, so it can never lose or corrupt it. Its output goes to
-``RUN_DIR/register.log``; its start and end are mission events, and while it runs the
-mission state's ``detail`` is :data:`REGISTERING`. Stopping the mission service stops
-the registration (its outputs are written atomically, so none is left half written);
-``phenorover register RUN_DIR`` redoes it at any time, on any machine holding the run
-folder and the scans.
+read-only, so it can never lose or corrupt it. The child is started by module name:
+the mission service imports nothing of the register service. It is given the
+deployment's manifest, so it reads its options from ``[services.register]`` as
+``phenorover register --manifest`` does. Its output goes to ``RUN_DIR/register.log``;
+its start and end are mission events, and while it runs the mission state's
+``detail`` is :data:`~common.messages.mission.REGISTERING`. Stopping the mission
+service stops the registration (its outputs are written atomically, so none is left
+half written); ``phenorover register RUN_DIR`` redoes it at any time, on any machine
+holding the run folder and the scans.
 """
 
 from __future__ import annotations
@@ -28,33 +32,42 @@ from collections.abc import Callable
 from pathlib import Path
 
 from common import keys
-from common.messages.mission import MissionPhase, MissionState
+from common.messages.mission import REGISTERING, MissionPhase, MissionState
 from common.transport import Bus
 
-REGISTERING = "registering"
+# the register service's module, run as a program (never imported here)
+REGISTER_MODULE = "services.register"
 # (level, text): a mission event
 Report = Callable[[str, str], None]
 
 
 class RegistrationJob:
     """One registration of ``run_dir`` in a child process; ``report`` is called from a
-    watcher thread when it ends."""
+    watcher thread when it ends. ``manifest``: the deployment's manifest, passed on
+    (``--manifest``) for its ``[services.register]`` options; None: the defaults."""
 
-    def __init__(self, run_dir: Path, report: Report) -> None:
+    def __init__(self, run_dir: Path, report: Report, manifest: Path | None = None) -> None:
         self.run_dir = run_dir
         self.report = report
+        self.manifest = manifest
         self.log_path = run_dir / "register.log"
         self._proc: subprocess.Popen[bytes] | None = None
         self._stopping = threading.Event()
 
-    def start(self) -> None:
-        """Start the child; raises OSError when it cannot be started."""
-        cmd = [sys.executable, "-m", "services.register", str(self.run_dir)]
+    def command(self) -> list[str]:
+        """The child's command line."""
+        cmd = [sys.executable, "-m", REGISTER_MODULE, str(self.run_dir)]
+        if self.manifest is not None:
+            cmd += ["--manifest", str(self.manifest)]
         if shutil.which("nice"):
             cmd = ["nice", "-n", "10", *cmd]
+        return cmd
+
+    def start(self) -> None:
+        """Start the child; raises OSError when it cannot be started."""
         with open(self.log_path, "wb") as out:
             self._proc = subprocess.Popen(
-                cmd, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+                self.command(), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
             )
         threading.Thread(target=self._watch, daemon=True, name="register-watch").start()
 
@@ -95,7 +108,8 @@ class RegistrationJob:
 
 def wait_registration(bus: Bus, final: MissionState, timeout: float) -> MissionState:
     """After a mission ended in ``final``: the mission state once the registration the
-    mission service started for it has ended (``final`` itself when none runs)."""
+    mission service started for it has ended (``final`` itself when none runs).
+    Prints progress to stdout and a timeout to stderr (it serves commands)."""
     if final.phase != MissionPhase.DONE or final.detail != REGISTERING:
         return final
     print(f"{final.mission}: registering the scans ...", flush=True)

@@ -1,0 +1,5 @@
+import sys
+
+from phenorover.eval.register.cli import main
+
+sys.exit(main())

@@ -1,0 +1,332 @@
+"""Benchmark results: one schema for every benchmark's JSON (``runs/bench/<name>.json``)
+and the writer they all use.
+
+A benchmark makes a :class:`Bench`, records every figure with :meth:`Bench.figure`
+(value, unit, its :class:`Goal` if it has one, the error models in force), every
+experiment that failed with :meth:`Bench.fail`, and ends with :meth:`Bench.finish`:
+it prints the figures with their error models, writes the JSON and returns the exit
+status, non-zero when an experiment failed. A missed target is not a failure (figures
+are reported, never asserted): it is written as missed, with the measured figure and
+what would close it. A figure that could not be measured has no value (never a
+stand-in number) and says why.
+
+Every figure carries its own date, commit and machine, so one copied out of the file
+still says where it came from. Values are in the figure's ``unit``; dates are UTC,
+ISO 8601.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import math
+import os
+import platform
+import subprocess
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal, TextIO
+
+import msgspec
+
+SCHEMA = "phenorover.bench/1"
+REPO = Path(__file__).resolve().parents[1]
+Verdict = Literal["met", "missed", "no target"]
+Op = Literal["<=", ">="]
+
+
+class ResultError(ValueError):
+    """A results file that is missing, unreadable or not of this schema (one line)."""
+
+
+class Target(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The figure must be ``op value``, in the figure's unit."""
+
+    op: Op
+    value: float
+
+    def met(self, v: float) -> bool:
+        return v <= self.value if self.op == "<=" else v >= self.value
+
+
+@dataclasses.dataclass(frozen=True)
+class Goal:
+    """A target as a benchmark sets it, with what would close it if missed: stated with
+    the target, so that a miss is never reported without it. Raises ValueError on an
+    unknown ``op``, a non-finite ``value`` or an empty ``close``."""
+
+    op: Op
+    value: float
+    close: str
+
+    def __post_init__(self) -> None:
+        if self.op not in ("<=", ">="):
+            raise ValueError(f"Goal.op: {self.op!r} is not '<=' or '>='")
+        if not math.isfinite(self.value):
+            raise ValueError(f"Goal.value: {self.value!r} is not finite")
+        if not self.close.strip():
+            raise ValueError("Goal.close: say what would close the target if it is missed")
+
+
+class Figure(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """One measured figure. ``value`` is None when it could not be measured
+    (``what_would_close_it`` then says why); ``headline``: the figure that answers the
+    target in simulation (the true one); ``paper``: the paper's figure in the same unit,
+    for comparison; ``error_models``: model name -> its parameters, as in force."""
+
+    name: str
+    value: float | None
+    unit: str
+    target: Target | None
+    verdict: Verdict
+    what_would_close_it: str
+    error_models: dict[str, str]
+    date: str
+    commit: str
+    machine: str
+    headline: bool = False
+    paper: float | None = None
+    note: str = ""
+
+
+class Failure(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """An experiment that did not produce its figures, and why."""
+
+    experiment: str
+    reason: str
+
+
+class BenchResult(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """A benchmark's results file. ``exit_code``: what the benchmark exited with (non-zero
+    when an experiment failed); ``details``: the benchmark's raw numbers, free-form."""
+
+    schema: str
+    benchmark: str
+    started: str
+    finished: str
+    commit: str
+    machine: str
+    exit_code: int
+    failures: list[Failure]
+    figures: list[Figure]
+    details: dict[str, Any] = {}
+
+
+def verdict(value: float | None, target: Target | None) -> Verdict:
+    """``no target`` without one; ``missed`` when not met or not measured."""
+    if target is None:
+        return "no target"
+    return "met" if value is not None and target.met(value) else "missed"
+
+
+def now() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def git_commit(repo: Path = REPO) -> str:
+    """The checkout's short commit, ``+dirty`` when tracked files differ from it (then
+    the commit alone does not name the code that ran); ``unknown`` without git."""
+
+    def git(*args: str) -> str | None:
+        try:
+            r = subprocess.run(
+                ["git", "--no-optional-locks", *args],
+                cwd=repo,
+                capture_output=True,
+                text=True,
+                timeout=30,
+            )
+        except (OSError, subprocess.TimeoutExpired):
+            return None
+        return r.stdout.strip() if r.returncode == 0 else None
+
+    head = git("rev-parse", "--short", "HEAD")
+    if not head:
+        return "unknown"
+    dirty = git("status", "--porcelain", "--untracked-files=no")
+    return f"{head}+dirty" if dirty else head
+
+
+def machine() -> str:
+    """Host, CPU, cores, memory and the 1-minute load average (timings depend on it)."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = " ".join(line.split(":", 1)[1].split())
+                break
+    except OSError:
+        pass
+    parts = [cpu, f"{os.cpu_count()} cores"]
+    try:
+        parts.append(f"{os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE') / 2**30:.0f} GiB")
+        parts.append(f"load {os.getloadavg()[0]:.1f}")
+    except (OSError, ValueError, AttributeError):
+        pass
+    return f"{platform.node()} ({', '.join(parts)})"
+
+
+def format_value(value: float | None, unit: str = "") -> str:
+    """A figure for a table: integers as such, else 3-4 significant digits."""
+    if value is None:
+        return "not measured"
+    if value.is_integer() and abs(value) < 1e15:
+        text = f"{int(value):,}"
+    elif abs(value) >= 100:
+        text = f"{value:,.1f}"
+    elif abs(value) >= 10:
+        text = f"{value:.2f}"
+    else:
+        text = f"{value:.3g}"
+    return f"{text} {unit}".strip() if unit not in ("", "%") else text + unit
+
+
+class Bench:
+    """Collects one benchmark's figures and failures; see the module doc."""
+
+    def __init__(
+        self, benchmark: str, error_models: Mapping[str, str] | None = None, repo: Path = REPO
+    ) -> None:
+        self.benchmark = benchmark
+        self.error_models = dict(error_models or {})
+        self.started = now()
+        self.commit = git_commit(repo)
+        self.figures: list[Figure] = []
+        self.failures: list[Failure] = []
+
+    def figure(
+        self,
+        name: str,
+        value: float | None,
+        unit: str,
+        *,
+        goal: Goal | None = None,
+        headline: bool = False,
+        paper: float | None = None,
+        note: str = "",
+        error_models: Mapping[str, str] | None = None,
+        missing: str = "",
+    ) -> Figure:
+        """Record a figure. ``value`` None (or not finite) means not measured:
+        ``missing`` says why. ``error_models`` defaults to the benchmark's."""
+        if value is not None and not math.isfinite(value):
+            missing = missing or f"the measurement gave {value!r}"
+            value = None
+        if value is None and not missing:
+            raise ValueError(f"figure {name!r}: not measured, and no reason given")
+        target = None if goal is None else Target(goal.op, goal.value)
+        v = verdict(value, target)
+        if value is None:
+            close = f"not measured: {missing}"
+        else:
+            close = goal.close if goal is not None and v == "missed" else ""
+        fig = Figure(
+            name=name,
+            value=None if value is None else float(value),
+            unit=unit,
+            target=target,
+            verdict=v,
+            what_would_close_it=close,
+            error_models=dict(self.error_models if error_models is None else error_models),
+            date=now(),
+            commit=self.commit,
+            machine=machine(),
+            headline=headline,
+            paper=paper,
+            note=note,
+        )
+        self.figures.append(fig)
+        return fig
+
+    def fail(self, experiment: str, reason: str) -> None:
+        """Record an experiment that failed: the benchmark will exit non-zero."""
+        self.failures.append(Failure(experiment, reason.strip() or "no reason given"))
+
+    def result(self, details: Mapping[str, Any] | None = None) -> BenchResult:
+        return BenchResult(
+            schema=SCHEMA,
+            benchmark=self.benchmark,
+            started=self.started,
+            finished=now(),
+            commit=self.commit,
+            machine=machine(),
+            exit_code=1 if self.failures else 0,
+            failures=list(self.failures),
+            figures=list(self.figures),
+            details=dict(details or {}),
+        )
+
+    def finish(
+        self,
+        path: Path | None,
+        details: Mapping[str, Any] | None = None,
+        out: TextIO | None = None,
+    ) -> int:
+        """Print the figures and their error models, write the JSON to ``path`` (when
+        given) and return the exit status: 1 when an experiment failed, else 0."""
+        res = self.result(details)
+        print(summary(res), file=out or sys.stdout, flush=True)
+        if path is not None:
+            write(res, path)
+        return res.exit_code
+
+
+def write(res: BenchResult, path: Path) -> None:
+    """Write ``res`` to ``path`` atomically (a reader never sees half a file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(msgspec.json.format(msgspec.json.encode(res), indent=1) + b"\n")
+    tmp.replace(path)
+
+
+def load(path: Path) -> BenchResult:
+    """Read a results file. Raises ResultError (one line) when it is missing,
+    unreadable or not of this schema."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ResultError(f"{path} is missing") from None
+    except OSError as exc:
+        raise ResultError(f"{path}: {exc.strerror}") from None
+    try:
+        head = msgspec.json.decode(raw)
+    except msgspec.DecodeError as exc:
+        raise ResultError(f"{path}: not JSON ({exc})") from None
+    if not isinstance(head, dict) or head.get("schema") != SCHEMA:
+        found = head.get("schema") if isinstance(head, dict) else None
+        raise ResultError(f"{path}: not a {SCHEMA} result (schema {found!r}): an older format")
+    try:
+        return msgspec.json.decode(raw, type=BenchResult)
+    except msgspec.ValidationError as exc:
+        raise ResultError(f"{path}: {exc}") from None
+
+
+def target_text(t: Target | None, unit: str) -> str:
+    return "–" if t is None else f"{t.op} {format_value(t.value, unit)}"
+
+
+def summary(res: BenchResult) -> str:
+    """Plain text: every figure with its target and verdict, what would close each
+    miss, the failures, and the error models in force."""
+    lines = [f"{res.benchmark} at {res.commit} on {res.machine}:"]
+    for f in res.figures:
+        mark = "* " if f.headline else "  "
+        judged = (
+            "no target"
+            if f.target is None
+            else f"target {target_text(f.target, f.unit)}: {f.verdict}"
+        )
+        lines.append(f"{mark}{f.name}: {format_value(f.value, f.unit)} ({judged})")
+        if f.what_would_close_it and f.target is not None:
+            lines.append(f"      what would close it: {f.what_would_close_it}")
+        elif f.what_would_close_it:
+            lines.append(f"      {f.what_would_close_it}")
+    for fail in res.failures:
+        lines.append(f"  FAILED {fail.experiment}: {fail.reason}")
+    models: dict[str, str] = {}
+    for f in res.figures:
+        models.update(f.error_models)
+    lines.append("error models in force:" + ("" if models else " none"))
+    lines += [f"  {k}: {v}" for k, v in models.items()]
+    return "\n".join(lines)
