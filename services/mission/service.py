@@ -32,13 +32,14 @@ from common.messages.mission import (
     MissionStatusQuery,
 )
 from common.messages.plan import PlanRequest, PlanResult
-from common.robot import RUN_COPY, dump_robot, scanner_model
+from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob
+from services.mission.runfiles import write_run_files
 from services.mission.survey import Aborted, Survey
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
@@ -171,12 +172,7 @@ class MissionService:
         log.create(
             name, plan.field, self.ctx.clock.now_ns(), msgspec.json.encode(plan).decode(), steps
         )
-        tmp = path.parent / "plan.json.tmp"
-        tmp.write_bytes(msgspec.json.encode(plan))
-        tmp.replace(path.parent / "plan.json")
-        tmp = path.parent / f"{RUN_COPY}.tmp"
-        tmp.write_text(dump_robot(self.ctx.robot))
-        tmp.replace(path.parent / RUN_COPY)
+        write_run_files(path.parent, plan, self.ctx.robot, self.ctx.manifest, self.ctx.field)
         self.plan = plan
         self._launch(name, log, segs)
 

@@ -152,8 +152,21 @@ def build_report(run: RunData, rep: RegistrationReport | None, outputs: Json) ->
         "stationary": stationary_table(run),
         "registration": None if rep is None else registration_table(rep),
         "registration_detail": None if rep is None else msgspec.to_builtins(rep),
+        "targets": target_sites(run),
         "outputs": outputs,
     }
+
+
+def target_sites(run: RunData) -> Json:
+    """How the spheres were placed, as far as the survey knows: the sites the field
+    file lists (where the surveyor set them out), or none listed."""
+    sites = [] if run.plan is None else [list(t) for t in run.plan.layout.targets]
+    how = (
+        f"{len(sites)} sites listed in the field file ({run.plan.field if run.plan else '?'})"
+        if sites
+        else "no sites listed in the field file: spheres found in the scans only"
+    )
+    return {"placement": how, "sites": sites}
 
 
 def _f(v: Any, digits: int = 2) -> str:
@@ -213,6 +226,8 @@ def markdown(report: Json, figures: list[str]) -> str:
         )
     reg = report["registration"]
     lines += ["", "## Registration", ""]
+    if report.get("targets"):
+        lines += [f"Sphere targets: {report['targets']['placement']}.", ""]
     if reg is None:
         lines.append("No scan was done: nothing to register.")
     else:

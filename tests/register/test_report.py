@@ -89,6 +89,11 @@ def test_report_from_the_stored_log_alone(mission_dir: Path) -> None:
     assert max(r["distance_to_planned_cm"] for r in rows) > 0.5
     assert all(r["distance_to_planned_cm"] < 15 for r in rows)
     assert rep["navigation"]["route_m"] > 0 and rep["registration"] is None
+    # the tiny field lists no sphere sites, and the report says so
+    assert rep["targets"] == {
+        "placement": "no sites listed in the field file: spheres found in the scans only",
+        "sites": [],
+    }
 
 
 def test_missing_scan_file_is_one_line(mission_dir: Path, tmp_path: Path, capsys) -> None:

@@ -1,0 +1,52 @@
+"""What a mission folder keeps beside its log, so that the survey can be redone or
+re-registered later, anywhere, with what it ran with: the plan (``plan.json``), the
+robot description (``robot.toml``) and the effective manifest (``manifest.toml``).
+Each is written under a temporary name and renamed, so none is ever half written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import tomli_w
+
+from common.config import load_manifest
+from common.messages.plan import PlanResult
+from common.robot import RUN_COPY, Robot, dump_robot, robot_path
+
+MANIFEST_COPY = "manifest.toml"
+
+
+def _atomic(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    tmp.replace(path)
+
+
+def _no_none(v: Any) -> Any:
+    """TOML has no null: an unset option is left out, as it would be written by hand."""
+    if isinstance(v, dict):
+        return {k: _no_none(x) for k, x in v.items() if x is not None}
+    if isinstance(v, list):
+        return [_no_none(x) for x in v]
+    return v
+
+
+def effective_manifest(manifest: Path, field: str) -> bytes:
+    """The deployment's manifest as this service loaded it, with the field as the
+    deployment resolved it (a ``--field`` given to ``phenorover sim`` replaces the
+    manifest's) and the robot description's file (its content is ``robot.toml``)."""
+    m = msgspec.to_builtins(load_manifest(manifest))
+    m["field"], m["robot"] = field, str(robot_path(m.get("robot", "")))
+    head = f"# the manifest this mission ran with: {manifest}, field and robot resolved\n"
+    return head.encode() + tomli_w.dumps(_no_none(m)).encode()
+
+
+def write_run_files(
+    folder: Path, plan: PlanResult, robot: Robot, manifest: Path | None, field: str
+) -> None:
+    _atomic(folder / "plan.json", msgspec.json.encode(plan))
+    _atomic(folder / RUN_COPY, dump_robot(robot).encode())
+    if manifest is not None:
+        _atomic(folder / MANIFEST_COPY, effective_manifest(manifest, field))
