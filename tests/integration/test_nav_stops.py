@@ -96,7 +96,10 @@ def drive_west(bus: Bus) -> Record[TruthPose]:
 def test_losing_rtk_stops_the_robot_within_a_second(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
-    pids = start_world(procs, router_endpoint, client_bus, tmp_path, [], [])
+    # real time, truth at 50 Hz: a stop bound in seconds is a real-time figure (at 4x
+    # every 10 ms of delivery and scheduling would count 40 ms)
+    rt = ["real_time_factor=1.0", "truth_hz=50.0"]
+    pids = start_world(procs, router_endpoint, client_bus, tmp_path, rt, [])
     fixes = record(client_bus, keys.GNSS_FIX.at(antenna=1))
     truth = drive_west(client_bus)
     progress = client_bus.latest(keys.NAV_PROGRESS)
