@@ -361,7 +361,9 @@ class Bus:
 
     def close(self) -> None:
         for h in reversed(self._handles):
-            with contextlib.suppress(zenoh.ZError):
+            # RuntimeError: a callback of this handle is running right now (a token
+            # going as its service stops); closing the session drops it all the same
+            with contextlib.suppress(zenoh.ZError, RuntimeError):
                 h.undeclare()
         self._handles.clear()
         self._pool.shutdown(wait=True, cancel_futures=True)

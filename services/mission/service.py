@@ -16,9 +16,11 @@ import time
 from pathlib import Path
 
 import msgspec
+import numpy as np
 
 from common import clock as clk
 from common import keys
+from common.field import FieldError, load_field
 from common.messages.mission import (
     REGISTERING,
     MissionAbort,
@@ -203,6 +205,16 @@ class MissionService:
             m = log.mission()
             if m is not None and m["state"] in ("running", "paused"):
                 plan = msgspec.json.decode(m["plan_json"], type=PlanResult)
+                if not self._surveys_this_field(plan):
+                    # another deployment's survey (another field): driving its route
+                    # here would be driving blind; it stays as it is for its own
+                    self.event(
+                        "warning",
+                        f"mission {m['id']} surveys field {plan.field}, not this "
+                        f"deployment's ({self.ctx.field}): not resumed",
+                    )
+                    log.close()
+                    continue
                 nxt = log.next_step()
                 self.plan = plan
                 self._launch(m["id"], log, segments(plan))
@@ -213,6 +225,18 @@ class MissionService:
                 )
                 return
             log.close()
+
+    def _surveys_this_field(self, plan: PlanResult) -> bool:
+        """Whether ``plan`` is of the deployment's field: the same plots, wherever the
+        field file lies and whatever it is called."""
+        try:
+            _, fld = load_field(self.ctx.field)
+        except FieldError:
+            return False
+        boxes = np.asarray(plan.plot_boxes.numpy(), dtype=np.float64).reshape(-1, 6)
+        return boxes.shape == fld.plot_boxes.shape and bool(
+            np.allclose(boxes, fld.plot_boxes, atol=1e-6)
+        )
 
     # --- the survey ---
     def _run_mission(self, segs: list[Segment]) -> None:
