@@ -246,23 +246,3 @@ def write_e57(
             )
         finally:
             e57.close()
-
-
-def read_e57(path: str | Path, index: int = 0) -> tuple[F64, F32, F64]:
-    """Points (N, 3) in the scan's own frame, intensity (N,) and its pose (4x4,
-    identity when the file has none) of scan ``index``."""
-    import pye57
-
-    e57 = pye57.E57(str(path), mode="r")
-    try:
-        raw = e57.read_scan_raw(index, ignore_unsupported_fields=True)
-        header = e57.get_header(index)
-        pose = np.eye(4)
-        if header.has_pose():
-            pose[:3, :3] = header.rotation_matrix
-            pose[:3, 3] = header.translation
-    finally:
-        e57.close()
-    pts = np.column_stack([raw["cartesianX"], raw["cartesianY"], raw["cartesianZ"]])
-    inten = np.asarray(raw.get("intensity", np.zeros(len(pts))), dtype=np.float32)
-    return pts.astype(np.float64), inten, pose

@@ -154,10 +154,18 @@ def test_complete_mission_with_pause_and_resume_from_another_process(
     cli = [sys.executable, "-m", "phenorover", "mission", "--connect", f"tcp/127.0.0.1:{d.port}"]
     r = subprocess.run([*cli, "pause"], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "paused" in r.stdout, r.stderr
-    held = d.wait(lambda x: x.phase == MissionPhase.PAUSED)
-    # a minute of sim time: a running mission would have moved on
+    paused = d.wait(lambda x: x.phase == MissionPhase.PAUSED)
     clock = record(d.bus, keys.SIM_CLOCK)
-    assert clock.until(lambda cs: bool(cs) and cs[-1].sim_ns > held.stamp_ns + 60 * 10**9, 30)
+
+    def sim_time_passes(after_ns: int, s: float) -> bool:
+        return clock.until(lambda cs: bool(cs) and cs[-1].sim_ns > after_ns + int(s * 1e9), 30)
+
+    # a pause that met the robot driving lets it brake first (a few seconds at most)
+    assert sim_time_passes(paused.stamp_ns, 5.0)
+    held = d.state.get()
+    assert held is not None and held.phase == MissionPhase.PAUSED
+    # a minute of sim time: a running mission would have moved on
+    assert sim_time_passes(held.stamp_ns, 60.0)
     now = d.state.get()
     assert now is not None and now.phase == MissionPhase.PAUSED
     # distance is measured: standing, it grows by the estimate's noise only

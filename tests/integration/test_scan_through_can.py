@@ -12,8 +12,8 @@ import numpy as np
 from common import keys
 from common.client import wait_alive
 from common.messages.scan import ScannerState
+from common.pointcloud import read_e57
 from common.transport import Bus
-from services.sim.render import read_e57
 from tests.conftest import Procs
 from tests.integration.test_scanner_service import start_scan
 
@@ -60,7 +60,8 @@ def test_scan_of_engr_lands_as_e57_with_pose_and_tilt(
     # the inclinometer reads the true tilt within its 0.015 deg noise (and int16 frames)
     assert abs(math.degrees(done.pitch - t.pitch)) < 0.1
     assert abs(math.degrees(done.roll - t.roll)) < 0.1
-    pts, intensity, pose = read_e57(Path(done.file))
+    (scan,) = read_e57(Path(done.file))
+    pts, intensity, pose = scan.points, scan.intensity, scan.pose
     assert len(pts) > 100_000 and len(intensity) == len(pts)
     assert np.allclose(pose, np.eye(4))  # as a scanner stores it: in its own frame
     r = np.linalg.norm(pts, axis=1)
