@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from common.field import load_field
 from common.field_geojson import field_frame
 from common.geo import wrap_angle
+from common.pointcloud import read_e57
 from common.robot import default_robot
 from phenorover.eval.error_models import compass, faro, rtk
 from phenorover.eval.results import Bench
@@ -33,10 +34,16 @@ from services.gnss.receiver import receiver_output
 from services.gnss.rtk_model import RtkErrorModel, RtkModelConfig
 from services.gnss.solution import FixBuilder, heading
 from services.planner.core import plan
-from services.sim.render import ScanSettings, read_e57, write_e57
+from services.sim.render import ScanSettings, write_e57
 from services.sim.robot import RobotState
 from services.sim.scene import LABEL_NAMES
 from services.sim.world import World, WorldConfig
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, intensity and pose of a single-scan E57 file."""
+    (scan,) = read_e57(path)
+    return scan.points, scan.intensity, scan.pose
 
 
 def compass_drive(minutes: float, seed: int = 7) -> dict[str, float]:
@@ -119,7 +126,7 @@ def scan_timing(out: Path) -> dict[str, float]:
         npts.append(len(scan.points))
         for lab, name in enumerate(LABEL_NAMES[1:], start=1):
             labels[name] += int(np.count_nonzero(scan.label == lab))
-    pts, _, _ = read_e57(out / "Scan_00001.e57")
+    pts, _, _ = _read(out / "Scan_00001.e57")
     return {
         "scans": len(times),
         "first_scan_s": times[0],

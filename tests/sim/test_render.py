@@ -1,16 +1,17 @@
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from common.field import load_field
 from common.geo import se3
+from common.pointcloud import read_e57
 from services.sim.foliage import FoliageConfig, build_foliage
 from services.sim.render import (
     FaroNoise,
     ScanSettings,
     range_sigma,
-    read_e57,
     render,
     scan_grid,
     write_e57,
@@ -19,6 +20,13 @@ from services.sim.robot import RobotState
 from services.sim.scene import GROUND, LEAF_HIT, POLE, SPHERE, STEM_HIT, Scene
 from services.sim.terrain import TerrainConfig, build_terrain
 from services.sim.world import World
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, intensity and pose of a single-scan E57 file."""
+    (scan,) = read_e57(path)
+    return scan.points, scan.intensity, scan.pose
+
 
 EMPTY5, EMPTY6, EMPTY7 = np.zeros((0, 5)), np.zeros((0, 6)), np.zeros((0, 7))
 # a window around +x, coarse enough to stay fast
@@ -110,7 +118,7 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
 
     path = tmp_path / "scan.e57"
     write_e57(path, s.points, s.intensity, pose, name="loc74", row=s.row, col=s.col)
-    pts, inten, pose_back = read_e57(path)
+    pts, inten, pose_back = _read(path)
     np.testing.assert_allclose(pts, s.points, atol=1e-5)
     np.testing.assert_allclose(inten, s.intensity, atol=1e-6)
     np.testing.assert_allclose(pose_back, pose, atol=1e-9)
@@ -119,7 +127,7 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
 def test_e57_without_pose_reads_identity(tmp_path):
     pts = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
     write_e57(tmp_path / "a.e57", pts, [0.1, 0.2])
-    back, _, pose = read_e57(tmp_path / "a.e57")
+    back, _, pose = _read(tmp_path / "a.e57")
     np.testing.assert_allclose(back, pts, atol=1e-6)
     np.testing.assert_allclose(pose, np.eye(4))
     with pytest.raises(ValueError, match="do not match"):

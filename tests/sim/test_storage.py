@@ -11,13 +11,21 @@ import numpy as np
 import pytest
 
 from common.field import load_field
+from common.pointcloud import read_e57
 from phenorover.eval.register.truth import read_truth
 from services.sim import snapshot
-from services.sim.render import read_e57, write_e57
+from services.sim.render import write_e57
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, atomic_path, confine, write_atomic
 from services.sim.truth_file import ScanTruth, write_truth
 from services.sim.world import WorldConfig
+
+
+def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points, intensity and pose of a single-scan E57 file."""
+    (scan,) = read_e57(path)
+    return scan.points, scan.intensity, scan.pose
+
 
 FIELD = "RenderRequest.path"
 
@@ -76,7 +84,7 @@ def test_scan_and_truth_files_leave_no_temporary_behind(tmp_path: Path) -> None:
         "Scan_00001.e57",
         "Scan_00001.truth.json",
     ]
-    assert np.allclose(read_e57(f)[0], pts, atol=1e-5)
+    assert np.allclose(_read(f)[0], pts, atol=1e-5)
     assert read_truth(f) == truth
 
 
