@@ -259,9 +259,12 @@ class Survey:
                 return False
             t0 += self.wait(0.1)
         if st.scan_id != step.scan_id or st.state not in (ScannerState.DONE, ScannerState.SCANNING):
+            self.event("info", f"scan {step.scan_id}: scanner at {st.scan_id}, {st.state}")
             return False
         p = self.settle()
         if p is None or self.off_by(step, p.x, p.y) > self.cfg.arrival_tolerance_m:
+            where = "no pose" if p is None else f"{100 * self.off_by(step, p.x, p.y):.1f} cm off"
+            self.event("warning", f"scan {step.scan_id}: on the scanner, but the robot is {where}")
             return False
         what = "done" if st.state == ScannerState.DONE else "still scanning"
         self.event("info", f"scan {step.scan_id}: found {what} on the scanner after a restart")
