@@ -3,7 +3,9 @@ from. ``BACKENDS`` maps the config's ``backend`` to a class."""
 
 from __future__ import annotations
 
+import logging
 import math
+import threading
 from collections.abc import Callable
 from typing import Protocol
 
@@ -13,8 +15,11 @@ from common import keys
 from common.messages.base import LaserScan
 from common.messages.core import Array
 from common.messages.sim import SimWheelCommand
+from common.ros2 import msgs as ros
+from common.ros2.node import Ros2Node
+from common.ros2.types import LASER_SCAN, ODOMETRY, TWIST
+from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
-from services.base import ros2_msgs as ros
 from services.base.config import BaseConfig
 
 # (stamp_ns, v, w) from the wheel encoders
@@ -61,7 +66,7 @@ def scan_from_ros(m: ros.LaserScan) -> LaserScan:
     # REP-117: below range_min or above range_max is "no return"
     ranges = np.where((ranges < m.range_min) | (ranges > m.range_max), np.inf, ranges)
     return LaserScan(
-        stamp_ns=m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec,
+        stamp_ns=ros.ns_of_time(m.header.stamp),
         frame_id=m.header.frame_id,
         angle_min=m.angle_min,
         angle_max=m.angle_max,
@@ -72,9 +77,44 @@ def scan_from_ros(m: ros.LaserScan) -> LaserScan:
     )
 
 
+class OdomWatch:
+    """Whether a ROS 2 base's odometry has gone quiet, timed on the service clock: an
+    arrival is noted from Zenoh's thread (``heard``) and dated at the next wheel
+    command (``check``, called at the control rate), so the two clocks of the base and
+    of its driver never meet. Until the first arrival the timeout runs from the first
+    check."""
+
+    def __init__(self, timeout_ns: int) -> None:
+        self.timeout_ns = timeout_ns
+        self.stale = False
+        self._heard = False
+        self._last_ns: int | None = None
+        self._lock = threading.Lock()
+
+    def heard(self) -> None:
+        with self._lock:
+            self._heard = True
+
+    def check(self, now_ns: int) -> bool:
+        """Whether the odometry is stale now; updates ``stale``."""
+        with self._lock:
+            if self._heard or self._last_ns is None:
+                self._last_ns = now_ns
+                self._heard = False
+            self.stale = now_ns - self._last_ns > self.timeout_ns
+            return self.stale
+
+
 class Ros2Base:
-    """Any ROS 2 base through zenoh-bridge-ros2dds: the bridge maps ROS topic
-    ``/cmd_vel`` to the Zenoh key ``cmd_vel`` (and so on), payloads in CDR."""
+    """Any ROS 2 base: Twist out, Odometry and LaserScan in, CDR payloads. Through
+    rmw_zenoh (``ros2_layout = "rmw_zenoh"``, :mod:`common.ros2`): this service is a
+    ROS 2 node on the Zenoh network; through zenoh-bridge-ros2dds (``"bridge"``): the
+    bridge maps ROS topic ``/cmd_vel`` to the Zenoh key ``cmd_vel`` (and so on).
+
+    With no odometry for ``ros2_odom_timeout_s`` the driver is taken for gone: the
+    wheels are commanded to zero (so a driver that returns does not resume an old
+    command) and one log line says so, another when odometry is back; the health
+    counter ``ros2_odom_stale`` is 1 meanwhile."""
 
     def __init__(
         self,
@@ -84,23 +124,55 @@ class Ros2Base:
         on_odom: OdomCallback,
         on_scan: Callable[[LaserScan], None],
     ) -> None:
-        self._bus = bus
-        self._cmd_key = cfg.ros2_cmd_vel
+        self._log = logging.getLogger(bus.name)
+        self._timeout_s = cfg.ros2_odom_timeout_s
+        self._watch = OdomWatch(int(cfg.ros2_odom_timeout_s * 1e9))
+        bus.report("ros2_odom_stale", lambda: int(self._watch.stale))
 
         def odom(m: ros.Odometry) -> None:
-            st = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+            self._watch.heard()
             p, t = m.pose.pose, m.twist.twist
             on_odom(
-                st, p.position.x, p.position.y, ros.yaw_of(p.orientation), t.linear.x, t.angular.z
+                ros.ns_of_time(m.header.stamp),
+                p.position.x,
+                p.position.y,
+                ros.yaw_of(p.orientation),
+                t.linear.x,
+                t.angular.z,
             )
 
-        bus.subscribe_raw(cfg.ros2_odom, decode_odometry, odom)
-        bus.subscribe_raw(cfg.ros2_scan, decode_scan, lambda m: on_scan(scan_from_ros(m)))
+        def scan(m: ros.LaserScan) -> None:
+            on_scan(scan_from_ros(m))
+
+        self._put: Callable[[ros.Twist], None]
+        if cfg.ros2_layout == "bridge":
+            key = cfg.ros2_cmd_vel
+            bus.subscribe_raw(cfg.ros2_odom, decode_odometry, odom)
+            bus.subscribe_raw(cfg.ros2_scan, decode_scan, scan)
+            self._put = lambda t: bus.put_raw(key, t.serialize())
+        else:
+            node = Ros2Node(bus.session, cfg.ros2_node, cfg.ros2_namespace, cfg.ros2_domain)
+            bus.report("ros2_dropped", lambda: node.dropped_total)
+            self._put = node.publisher(cfg.ros2_cmd_vel, TWIST).put
+            node.subscribe(cfg.ros2_odom, ODOMETRY, odom)
+            node.subscribe(cfg.ros2_scan, LASER_SCAN, scan, qos=SENSOR_QOS)
+            self.node = node
 
     def send(self, v: float, w: float, stamp_ns: int) -> None:
         if not (math.isfinite(v) and math.isfinite(w)):
             v = w = 0.0
-        self._bus.put_raw(self._cmd_key, ros.twist(v, w).serialize())
+        was = self._watch.stale
+        if self._watch.check(stamp_ns):
+            if not was:
+                self._log.warning(
+                    "no odometry from the ROS 2 base for %.2f s (its driver is gone?): "
+                    "wheels stopped until it is back",
+                    self._timeout_s,
+                )
+            v = w = 0.0
+        elif was:
+            self._log.info("odometry from the ROS 2 base is back: commands pass again")
+        self._put(ros.twist(v, w))
 
 
 BACKENDS: dict[str, type[SimBase] | type[Ros2Base]] = {"sim": SimBase, "ros2": Ros2Base}

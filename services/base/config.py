@@ -2,7 +2,10 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
+
 Pos = Annotated[float, msgspec.Meta(gt=0)]
+Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
 
 
 class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -13,8 +16,15 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     within 0.2 m (0.125 m to the trip, about 0.08 m of drivetrain lag).
 
     ``backend``: ``sim`` (the simulator's base) or ``ros2`` (any ROS 2 base, the
-    Husky's own driver included, through zenoh-bridge-ros2dds: Twist out on
-    ``ros2_cmd_vel``, Odometry in on ``ros2_odom``, LaserScan in on ``ros2_scan``).
+    Husky's own driver included: Twist out on ``ros2_cmd_vel``, Odometry in on
+    ``ros2_odom``, LaserScan in on ``ros2_scan``). ``ros2_layout`` says how ROS 2 is
+    reached: ``rmw_zenoh`` (the ROS 2 nodes run ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``,
+    Jazzy's rmw_zenoh 0.2.x, and share this Zenoh network; topic names resolve against
+    ``ros2_namespace``, the base appears in ``ros2 node list`` as ``ros2_node`` in
+    domain ``ros2_domain``) or ``bridge`` (zenoh-bridge-ros2dds maps ROS topic
+    ``/cmd_vel`` to the plain Zenoh key ``cmd_vel``). ``ros2_odom_timeout_s``: with no
+    odometry from the ROS 2 base for this long (its driver is gone, or the link to
+    it), the base commands zero until odometry returns, and says so in its log.
     """
 
     backend: Literal["sim", "ros2"]  # required: a robot must never drive a simulated base
@@ -24,6 +34,12 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     # encoder noise the odometry reports as variance per unit travelled/turned
     var_v: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
     var_w: Annotated[float, msgspec.Meta(ge=0)] = 4e-3
-    ros2_cmd_vel: str = "cmd_vel"
-    ros2_odom: str = "odom"
-    ros2_scan: str = "scan"
+    ros2_cmd_vel: Topic = "cmd_vel"
+    ros2_odom: Topic = "odom"
+    ros2_scan: Topic = "scan"
+    ros2_layout: Literal["rmw_zenoh", "bridge"] = "rmw_zenoh"
+    # ROS_DOMAIN_ID's range (0-232: what DDS port arithmetic allows, kept by rmw_zenoh)
+    ros2_domain: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
+    ros2_namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
+    ros2_node: Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)] = "phenorover_base"
+    ros2_odom_timeout_s: Pos = 0.5

@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import pytest
 
-from services.base import ros2_msgs as ros
+from common.ros2 import msgs as ros
 from services.base.backends import decode_odometry, scan_from_ros
 
 

@@ -1,0 +1,166 @@
+"""ROS 2 message types as CDR (pycdr2): what the base's ``ros2`` backend and the
+simulated Husky driver put on the wire, under either key layout (rmw_zenoh or
+zenoh-bridge-ros2dds). Field layouts follow geometry_msgs, nav_msgs, sensor_msgs and
+std_msgs of ROS 2 Jazzy exactly; payloads carry the 4-byte CDR encapsulation header
+(little-endian, ``00 01 00 00``), as rmw_zenoh's FastCDR (DDS_CDR mode) writes them.
+"""
+
+# mypy: disable-error-code="type-arg,valid-type,arg-type"
+# (pycdr2 declares IDL types as subscripted annotations, array[float64, 36], that mypy
+# cannot read, nor see that a list is one; this module is data declarations and the
+# builders below, which take plain Python values.)
+
+import math
+from dataclasses import dataclass
+
+from pycdr2 import IdlStruct
+from pycdr2.types import array, float32, float64, int32, sequence, uint32
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces/msg/Time"):
+    sec: int32
+    nanosec: uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs/msg/Header"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs/msg/Vector3"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs/msg/Point"):
+    x: float64
+    y: float64
+    z: float64
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs/msg/Quaternion"):
+    x: float64
+    y: float64
+    z: float64
+    w: float64
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs/msg/Pose"):
+    position: Point
+    orientation: Quaternion
+
+
+@dataclass
+class PoseWithCovariance(IdlStruct, typename="geometry_msgs/msg/PoseWithCovariance"):
+    pose: Pose
+    covariance: array[float64, 36]
+
+
+@dataclass
+class Twist(IdlStruct, typename="geometry_msgs/msg/Twist"):
+    linear: Vector3
+    angular: Vector3
+
+
+@dataclass
+class TwistWithCovariance(IdlStruct, typename="geometry_msgs/msg/TwistWithCovariance"):
+    twist: Twist
+    covariance: array[float64, 36]
+
+
+@dataclass
+class Odometry(IdlStruct, typename="nav_msgs/msg/Odometry"):
+    header: Header
+    child_frame_id: str
+    pose: PoseWithCovariance
+    twist: TwistWithCovariance
+
+
+@dataclass
+class LaserScan(IdlStruct, typename="sensor_msgs/msg/LaserScan"):
+    header: Header
+    angle_min: float32
+    angle_max: float32
+    angle_increment: float32
+    time_increment: float32
+    scan_time: float32
+    range_min: float32
+    range_max: float32
+    ranges: sequence[float32]
+    intensities: sequence[float32]
+
+
+def twist(v: float, w: float) -> Twist:
+    """A planar velocity command: ``v`` m/s along x, ``w`` rad/s about z."""
+    return Twist(Vector3(v, 0.0, 0.0), Vector3(0.0, 0.0, w))
+
+
+def yaw_of(q: Quaternion) -> float:
+    """Yaw (rad, about z) of a unit quaternion."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def quaternion_of_yaw(yaw: float) -> Quaternion:
+    """The unit quaternion of a rotation by ``yaw`` rad about z."""
+    return Quaternion(0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+
+
+def time_of_ns(stamp_ns: int) -> Time:
+    """builtin_interfaces/Time of nanoseconds (floor division: negative stamps too)."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return Time(sec, nanosec)
+
+
+def ns_of_time(t: Time) -> int:
+    return int(t.sec) * 1_000_000_000 + int(t.nanosec)
+
+
+def odometry(
+    stamp_ns: int,
+    frame_id: str,
+    child_frame_id: str,
+    pose: tuple[float, float, float],
+    twist_vw: tuple[float, float],
+    pose_covariance: list[float],
+    twist_covariance: list[float],
+) -> Odometry:
+    """A planar nav_msgs/Odometry: ``pose`` (x m, y m, yaw rad) of ``child_frame_id``
+    in ``frame_id``, ``twist_vw`` (v m/s, w rad/s) in the child frame, row-major 6x6
+    covariances (36 values each)."""
+    x, y, yaw = pose
+    return Odometry(
+        header=Header(time_of_ns(stamp_ns), frame_id),
+        child_frame_id=child_frame_id,
+        pose=PoseWithCovariance(Pose(Point(x, y, 0.0), quaternion_of_yaw(yaw)), pose_covariance),
+        twist=TwistWithCovariance(twist(*twist_vw), twist_covariance),
+    )
+
+
+def laser_scan(
+    stamp_ns: int,
+    frame_id: str,
+    angles: tuple[float, float, float],
+    range_limits: tuple[float, float],
+    ranges: list[float],
+) -> LaserScan:
+    """sensor_msgs/LaserScan of ``angles`` (min, max, increment; rad), ``range_limits``
+    (min, max; m) and ``ranges`` (m); no timing nor intensities."""
+    return LaserScan(
+        header=Header(time_of_ns(stamp_ns), frame_id),
+        angle_min=angles[0],
+        angle_max=angles[1],
+        angle_increment=angles[2],
+        time_increment=0.0,
+        scan_time=0.0,
+        range_min=range_limits[0],
+        range_max=range_limits[1],
+        ranges=ranges,
+        intensities=[],
+    )

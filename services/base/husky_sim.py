@@ -1,0 +1,153 @@
+"""A simulated Husky ROS 2 driver over rmw_zenoh: the ``ros2`` backend of the base
+service drives it as it drives the real Husky, and it drives the simulator's base.
+
+``python -m services.base.husky_sim --manifest M`` (config ``[services.husky-sim]``).
+As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
+
+- subscribes ``cmd_vel`` (geometry_msgs/Twist) and forwards each command to the
+  simulator as a SimWheelCommand on ``sim/device/wheels``;
+- publishes ``odom`` (nav_msgs/Odometry) at the encoder rate, one per
+  ``sim/device/encoders`` message: pose integrated from the encoder twist (the
+  base service's own dead reckoning), twist = the encoder twist, covariances as
+  Clearpath's husky_control configures diff_drive_controller;
+- publishes ``scan`` (sensor_msgs/LaserScan) from ``sim/device/lidar``.
+
+Stamps are on the service clock (the sim clock in a simulated deployment).
+The fault hook (``HuskySim.fault``; SIGUSR1 in the process, SIGUSR2 to undo) makes it
+silent, as if the driver were gone: nothing is published and commands are not
+forwarded.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+from typing import Annotated
+
+import msgspec
+import numpy as np
+
+from common import keys
+from common.messages.base import LaserScan
+from common.messages.sim import SimEncoders, SimWheelCommand
+from common.ros2 import msgs as ros
+from common.ros2.node import Ros2Node
+from common.ros2.types import LASER_SCAN, ODOMETRY, TWIST
+from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
+from common.service import Context, run
+from services.base.drive import OdometryIntegrator
+
+Cov6 = tuple[float, float, float, float, float, float]
+Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
+# husky_control/config/control.yaml (husky_velocity_controller): x y z roll pitch yaw
+HUSKY_COVARIANCE: Cov6 = (0.001, 0.001, 0.001, 0.001, 0.001, 0.03)
+
+
+class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The simulated driver as a ROS 2 node: topics as the base service's
+    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan`` name them, resolved against
+    ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x, y, z,
+    roll, pitch, yaw) the odometry carries."""
+
+    domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
+    namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
+    node_name: Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)] = "husky_node"
+    cmd_vel: Topic = "cmd_vel"
+    odom: Topic = "odom"
+    scan: Topic = "scan"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    pose_covariance: Cov6 = HUSKY_COVARIANCE
+    twist_covariance: Cov6 = HUSKY_COVARIANCE
+
+
+def covariance(diagonal: Cov6) -> list[float]:
+    """A row-major 6x6 covariance with ``diagonal`` on its diagonal."""
+    return [float(v) for v in np.diag(np.asarray(diagonal, dtype=np.float64)).ravel()]
+
+
+def scan_to_ros(scan: LaserScan, stamp_ns: int) -> ros.LaserScan:
+    """The simulator's scan as sensor_msgs/LaserScan (``inf``: no return, REP-117)."""
+    return ros.laser_scan(
+        stamp_ns,
+        scan.frame_id,
+        (scan.angle_min, scan.angle_max, scan.angle_increment),
+        (scan.range_min, scan.range_max),
+        scan.ranges.numpy().astype(np.float32).tolist(),
+    )
+
+
+class HuskySim:
+    def __init__(self, ctx: Context, cfg: HuskySimConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        self.silent = False
+        self.refused = 0  # commands that were not finite
+        self._lock = threading.Lock()
+        self._odom = OdometryIntegrator()
+        self._pose_cov = covariance(cfg.pose_covariance)
+        self._twist_cov = covariance(cfg.twist_covariance)
+        self.node = Ros2Node(ctx.bus.session, cfg.node_name, cfg.namespace, cfg.domain_id)
+        self._odom_pub = self.node.publisher(cfg.odom, ODOMETRY)
+        self._scan_pub = self.node.publisher(cfg.scan, LASER_SCAN, qos=SENSOR_QOS)
+        self._wheels = ctx.bus.publisher(keys.SIM_WHEELS)
+        ctx.bus.report("ros2_dropped", lambda: self.node.dropped_total)
+        ctx.bus.report("commands_refused", lambda: self.refused)
+        self.node.subscribe(cfg.cmd_vel, TWIST, self._on_cmd)
+        ctx.bus.subscribe(keys.SIM_ENCODERS, self._on_encoders)
+        ctx.bus.subscribe(keys.SIM_LIDAR, self._on_lidar)
+
+    def fault(self, silent: bool) -> None:
+        """Go silent (the ROS 2 driver gone) or come back."""
+        if silent != self.silent:
+            self.ctx.log.warning("fault: driver %s", "silent" if silent else "back")
+        self.silent = silent
+
+    def _on_cmd(self, t: ros.Twist) -> None:
+        if self.silent:
+            return
+        v, w = t.linear.x, t.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            self.refused += 1
+            if self.refused == 1:
+                self.ctx.log.warning("cmd_vel refused: v=%r w=%r is not finite", v, w)
+            return
+        self._wheels.put(SimWheelCommand(stamp_ns=self.ctx.clock.now_ns(), v=v, w=w))
+
+    def _on_encoders(self, m: SimEncoders) -> None:
+        with self._lock:
+            self._odom.update(m.v, m.w, m.stamp_ns)
+            x, y, yaw = self._odom.x, self._odom.y, self._odom.yaw
+        if self.silent:
+            return
+        self._odom_pub.put(
+            ros.odometry(
+                self.ctx.clock.now_ns(),
+                self.cfg.odom_frame,
+                self.cfg.base_frame,
+                (x, y, yaw),
+                (m.v, m.w),
+                self._pose_cov,
+                self._twist_cov,
+            )
+        )
+
+    def _on_lidar(self, scan: LaserScan) -> None:
+        if not self.silent:
+            self._scan_pub.put(scan_to_ros(scan, self.ctx.clock.now_ns()))
+
+    def run(self, stop: threading.Event) -> None:
+        stop.wait()
+        self.node.close()
+
+
+def build(ctx: Context, cfg: HuskySimConfig) -> HuskySim:
+    sim = HuskySim(ctx, cfg)
+    # build() runs on the main thread, where Python handles signals
+    signal.signal(signal.SIGUSR1, lambda *_: sim.fault(True))
+    signal.signal(signal.SIGUSR2, lambda *_: sim.fault(False))
+    return sim
+
+
+if __name__ == "__main__":
+    run("husky-sim", HuskySimConfig, build)
