@@ -9,7 +9,20 @@ from __future__ import annotations
 
 import math
 
+import msgspec
+
 from services.gnss.nmea import KNOT_MPS, Gga, Gst, Rmc, checksum
+
+
+class Vtg(msgspec.Struct, frozen=True, kw_only=True):
+    """VTG: course over ground (degrees clockwise from true north) and speed (m/s).
+    Formatted only: the gnss service has no use for it, so the parser checks its
+    framing and checksum and passes over it."""
+
+    talker: str = "GN"
+    course_deg: float | None = None
+    speed_mps: float | None = None
+    mode: str = ""
 
 
 def _sentence(addr: str, fields: list[str]) -> str:
@@ -60,23 +73,44 @@ def format_gga(g: Gga) -> str:
     )
 
 
-def format_rmc(r: Rmc) -> str:
-    """The RMC sentence (NMEA 4.10 form, nav status ``V``) for ``r``."""
+def format_rmc(r: Rmc, nav_status: bool = True) -> str:
+    """The RMC sentence for ``r``: NMEA 4.10 form (nav status ``V``), or with
+    ``nav_status=False`` the NMEA 2.3 form that ends at the mode letter (RTKLIB and
+    Emlid Reach receivers send that one)."""
     spd = None if r.speed_mps is None else r.speed_mps / KNOT_MPS
+    fields = [
+        _fmt_time(r.time_s),
+        "A" if r.valid else "V",
+        *_fmt_angle(r.lat_deg, 2, "N", "S"),
+        *_fmt_angle(r.lon_deg, 3, "E", "W"),
+        _fmt(spd, ".4f"),
+        _fmt(r.course_deg, ".3f"),
+        "" if r.date is None else r.date.strftime("%d%m%y"),
+        "",
+        "",
+        r.mode,
+        "V",
+    ]
+    return _sentence(f"{r.talker}RMC", fields if nav_status else fields[:-1])
+
+
+def format_vtg(v: Vtg) -> str:
+    """The VTG sentence (NMEA 2.3 form, with the mode letter) for ``v``: true course,
+    no magnetic course, speed in knots and km/h."""
+    knots = None if v.speed_mps is None else v.speed_mps / KNOT_MPS
+    kmh = None if v.speed_mps is None else v.speed_mps * 3.6
     return _sentence(
-        f"{r.talker}RMC",
+        f"{v.talker}VTG",
         [
-            _fmt_time(r.time_s),
-            "A" if r.valid else "V",
-            *_fmt_angle(r.lat_deg, 2, "N", "S"),
-            *_fmt_angle(r.lon_deg, 3, "E", "W"),
-            _fmt(spd, ".4f"),
-            _fmt(r.course_deg, ".3f"),
-            "" if r.date is None else r.date.strftime("%d%m%y"),
+            _fmt(v.course_deg, ".3f"),
+            "T",
             "",
-            "",
-            r.mode,
-            "V",
+            "M",
+            _fmt(knots, ".4f"),
+            "N",
+            _fmt(kmh, ".4f"),
+            "K",
+            v.mode,
         ],
     )
 

@@ -4,6 +4,7 @@ compass heading out on the bus."""
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 from common import keys
 from common.field_geojson import load_frame
@@ -26,6 +27,11 @@ class GnssService:
             a.id: ctx.bus.publisher(keys.GNSS_FIX.at(antenna=a.id)) for a in cfg.antennas
         }
         self.receivers = [open_receiver(cfg, a, ctx.bus, self.frame) for a in cfg.antennas]
+        # bytes between sentences that are not NMEA (line noise) are skipped by the
+        # splitter, never parsed: counted here, as bad sentences are in decode_errors
+        self.splitters = {rx.antenna: LineSplitter() for rx in self.receivers}
+        for antenna, sp in self.splitters.items():
+            ctx.bus.report(f"antenna{antenna}_garbage_bytes", _count(sp))
         self._lock = threading.Lock()
         self._latest: dict[int, tuple[float, NavSatFix]] = {}
 
@@ -41,7 +47,7 @@ class GnssService:
         self.heading_pub.put(heading(f1, f2, self.frame, self.compass))
 
     def _read(self, rx: Receiver, stop: threading.Event) -> None:
-        splitter = LineSplitter()
+        splitter = self.splitters[rx.antenna]
         builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
         where = f"gnss/{rx.antenna}/nmea"
         while not stop.is_set():
@@ -71,6 +77,10 @@ class GnssService:
             t.join(timeout=2.0)
         for rx in self.receivers:
             rx.close()
+
+
+def _count(splitter: LineSplitter) -> Callable[[], int]:
+    return lambda: splitter.dropped_bytes
 
 
 def build(ctx: Context, cfg: GnssConfig) -> GnssService:

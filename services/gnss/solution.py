@@ -16,18 +16,24 @@ from services.gnss.nmea import Gga, Gst
 class FixBuilder:
     """Turns one antenna's GGA (+ GST) stream into NavSatFix messages.
 
-    Receivers send GST before or after GGA in an epoch; the covariance uses the GST
-    of the same epoch when it came first, else the newest one within 1.5 s, else the
-    fallback sigma for the fix type.
+    Receivers send GST before or after GGA in an epoch (a Reach M2 sends it after);
+    the covariance uses the GST of the same epoch when it came first, else the newest
+    one within 1.5 s, else the fallback sigma for the fix type. An older GST is not
+    used across a change of fix type: the first RTK-float fix after a fixed one must
+    not carry the fixed solution's millimetres.
     """
 
     def __init__(self, antenna: int, fallback_sigma_m: dict[str, float]) -> None:
         self.antenna = antenna
         self.fallback = fallback_sigma_m
         self._gst: Gst | None = None
+        self._gst_quality: FixType | None = None  # of the GGA it followed; None: unknown
+        self._last_gga: tuple[float | None, FixType] | None = None
 
     def on_gst(self, gst: Gst) -> None:
         self._gst = gst
+        last = self._last_gga
+        self._gst_quality = last[1] if last is not None and last[0] == gst.time_s else None
 
     def sigmas(self, gga: Gga) -> tuple[float, float, float]:
         g = self._gst
@@ -38,6 +44,7 @@ class FixBuilder:
             and abs(((gga.time_s - g.time_s + 43200) % 86400) - 43200) <= 1.5
             and g.std_lat_m is not None
             and g.std_lon_m is not None
+            and (g.time_s == gga.time_s or self._gst_quality in (None, gga.quality))
         ):
             alt = g.std_alt_m if g.std_alt_m is not None else 2 * g.std_lat_m
             return g.std_lon_m, g.std_lat_m, alt
@@ -46,6 +53,7 @@ class FixBuilder:
 
     def on_gga(self, gga: Gga, stamp_ns: int) -> NavSatFix | None:
         """The fix for this GGA, or None when the receiver has no position."""
+        self._last_gga = (gga.time_s, FixType(gga.quality))
         if gga.lat_deg is None or gga.lon_deg is None or gga.quality == FixType.NO_FIX:
             return None
         se, sn, su = self.sigmas(gga)
