@@ -30,6 +30,12 @@ class Clock(Protocol):
         """Block until ``now_ns() >= t_ns``; False if ``stop`` was set first."""
         ...
 
+    def wait_started(self, timeout: float) -> bool:
+        """Whether the clock tells time yet, waiting up to ``timeout`` seconds for it: a
+        sim clock reads 0 until its first message, and a deadline taken then is no
+        deadline."""
+        ...
+
 
 def now_s(clock: Clock) -> float:
     return clock.now_ns() / NS
@@ -57,6 +63,9 @@ def ticks(clock: Clock, hz: float, stop: threading.Event) -> Iterator[int]:
 class WallClock:
     def now_ns(self) -> int:
         return time.time_ns()
+
+    def wait_started(self, timeout: float) -> bool:
+        return True
 
     def sleep_until_ns(self, t_ns: int, stop: threading.Event) -> bool:
         while True:

@@ -324,8 +324,20 @@ class MissionService:
         self.detail = REGISTERING
         self.event("info", f"{REGISTERING} the scans: log in {job.log_path}")
 
+    def _clock_started(self, stop: threading.Event) -> bool:
+        """Wait for the clock (a sim clock reads 0 until the simulator is heard): every
+        wait of a resumed survey takes its deadline from it, and one taken at 0 has long
+        passed when the first message comes."""
+        if self.ctx.clock.wait_started(0.0):
+            return True
+        self.ctx.log.info("waiting for the clock before resuming")
+        while not stop.is_set():
+            if self.ctx.clock.wait_started(0.5):
+                return True
+        return False
+
     def run(self, stop: threading.Event) -> None:
-        if self.cfg.resume:
+        if self.cfg.resume and self._clock_started(stop):
             self.resume_unfinished()
         for _ in clk.ticks(self.ctx.clock, 1.0, stop):
             self.state_pub.put(self.state())

@@ -256,6 +256,7 @@ class Survey:
         t0 = self.now()
         while (st := self.scanner.get()) is None:  # a restarted mission hears it soon
             if (self.now() - t0) / NS > self.cfg.scanner_lost_s:
+                self.event("warning", f"scan {step.scan_id}: no word from the scanner")
                 return False
             t0 += self.wait(0.1)
         if st.scan_id != step.scan_id or st.state not in (ScannerState.DONE, ScannerState.SCANNING):
