@@ -146,10 +146,13 @@ class ScannerClient:
         name = type(frame).__name__
         msg = self._codec.encode(frame)
         attempts = 1 + self.retries
+        send_error = ""  # why the last attempt could not even be sent (bus-off)
         for attempt in range(1, attempts + 1):
             try:
                 self._bus.send(msg)
+                send_error = ""
             except can.CanError as e:
+                send_error = f"; sending failed: {e}"
                 log.warning("sending %s failed (attempt %d/%d): %s", name, attempt, attempts, e)
             deadline = time.monotonic() + self.ack_timeout_s
             while (remaining := deadline - time.monotonic()) > 0:
@@ -161,6 +164,7 @@ class ScannerClient:
             log.warning("no ACK for %s (attempt %d/%d)", name, attempt, attempts)
         raise AckTimeout(
             f"no ACK for {name} after {attempts} attempts of {self.ack_timeout_s} s each"
+            f"{send_error}"
         )
 
     # --- status tracking ---

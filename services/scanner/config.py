@@ -11,7 +11,9 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     """The FARO scanner over its CAN automation interface.
 
     ``backend``: ``can`` (python-can with ``interface``/``channel``/``bitrate``:
-    ``socketcan``/``can0`` on the Jetson) or ``sim`` (a FARO emulator on a virtual bus
+    ``socketcan``/``can0`` on the Jetson; ``slcan`` with a serial ``channel`` such as
+    ``/dev/ttyACM0`` for a USB-CAN adapter, or the link that ``faro-sim`` makes, at
+    ``tty_baudrate``) or ``sim`` (a FARO emulator on a virtual bus
     in this process; completed scans are rendered by the simulator into
     ``storage_dir``). ``stuck_timeout_s`` and ``status_timeout_s`` run on the service's
     clock (sim time in simulation), ``ack_timeout_s`` on wall time.
@@ -21,6 +23,7 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     interface: str = "socketcan"
     channel: str = "can0"
     bitrate: Annotated[int, msgspec.Meta(gt=0)] = 500_000
+    tty_baudrate: Annotated[int, msgspec.Meta(gt=0)] = 115_200  # slcan only
     storage_dir: str = "runs/scanner-card"
     ack_timeout_s: Pos = 0.5
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
@@ -30,4 +33,20 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     # simulation only
     sim_faults: FaroFaults = msgspec.field(default_factory=FaroFaults)
     sim_scan_time_s: Pos | None = None  # default: the profile's FARO scan time
+    render_step_deg: Annotated[float, msgspec.Meta(gt=0, le=5)] = 0.36
+
+
+class FaroSimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The FARO emulator behind an SLCAN serial link (``python -m
+    services.scanner.faro_sim``, ``[services.faro-sim]``): it makes a pseudo-terminal
+    and the symlink ``link`` to it, which the scanner service opens with
+    ``backend = "can"``, ``interface = "slcan"``, ``channel = <link>``. Completed scans
+    are rendered by the simulator into ``storage_dir`` (the scanner's card: give the
+    scanner service the same folder). ``scan_time_s``: every scan's duration on the
+    service clock (default: the profile's FARO scan time)."""
+
+    link: str = "runs/hil/faro-can"
+    storage_dir: str = "runs/scanner-card"
+    faults: FaroFaults = msgspec.field(default_factory=FaroFaults)
+    scan_time_s: Pos | None = None
     render_step_deg: Annotated[float, msgspec.Meta(gt=0, le=5)] = 0.36

@@ -8,33 +8,49 @@ scanner's card.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable
-from pathlib import Path
 
 import can
 
-from common import keys
-from common.messages.sim import RenderRequest
+from common.config import ConfigError
 from common.service import Context
-from services.scanner.can_codec import ScanProfile
+from services.scanner.card import RenderedCard, ScanDuration, scan_path
 from services.scanner.config import ScannerConfig
-from services.scanner.emulator import FaroEmulator, default_scan_duration_s
+from services.scanner.emulator import FaroEmulator
+from services.scanner.slcan_host import SlcanHost
 
-
-def scan_path(storage_dir: str, scan_id: int, project: str = "") -> Path:
-    """Where scan ``scan_id`` of ``project`` is stored (FARO's naming: Scan_00001)."""
-    return Path(storage_dir) / project / f"Scan_{scan_id:05d}.e57"
+__all__ = ["BACKENDS", "BusOffGate", "CanDevice", "SimDevice", "scan_path"]
 
 
 class CanDevice:
+    """A real bus: SocketCAN, or an SLCAN serial adapter (``interface = "slcan"``,
+    through :class:`SlcanHost`, which also reads the adapter's error flags)."""
+
     project = ""  # the scan project the next scans go to (set by the service)
 
     def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
-        self.bus: can.BusABC = can.Bus(
-            interface=cfg.interface, channel=cfg.channel, bitrate=cfg.bitrate
-        )
+        try:
+            if cfg.interface == "slcan":
+                self.bus: can.BusABC = SlcanHost(
+                    cfg.channel, bitrate=cfg.bitrate, tty_baudrate=cfg.tty_baudrate
+                )
+            else:
+                self.bus = can.Bus(
+                    interface=cfg.interface, channel=cfg.channel, bitrate=cfg.bitrate
+                )
+        except (can.CanError, OSError, ValueError) as exc:
+            # one line naming what could not be opened, not a traceback
+            raise ConfigError(
+                f"scanner: cannot open CAN {cfg.interface} channel {cfg.channel!r}: {exc}"
+            ) from None
+
+    def bus_error(self) -> str:
+        """What is wrong with the bus in one line; empty while it is fine."""
+        if isinstance(self.bus, SlcanHost):
+            return self.bus.error()
+        state = self.bus.state
+        return "" if state == can.BusState.ACTIVE else f"bus state {state.name}"
 
     def close(self) -> None:
         self.bus.shutdown()
@@ -76,46 +92,32 @@ class BusOffGate(can.BusABC):
 class SimDevice:
     """The emulated FARO on a virtual bus private to this process."""
 
-    project = ""  # the scan project the next scans go to (set by the service)
-
     def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
         channel = f"faro-sim-{os.getpid()}"
         client_bus = can.Bus(interface="virtual", channel=channel)
         self._device_bus = can.Bus(interface="virtual", channel=channel)
-        self._ctx, self._cfg = ctx, cfg
-        self._inclination = (0.0, 0.0)
-        Path(cfg.storage_dir).mkdir(parents=True, exist_ok=True)
-        fixed = cfg.sim_scan_time_s
-
-        def duration(p: ScanProfile) -> float:
-            return default_scan_duration_s(p) if fixed is None else fixed
-
+        self.card = RenderedCard(ctx, cfg.storage_dir, cfg.render_step_deg)
         self.emulator = FaroEmulator(
             self._device_bus,
             now=lambda: ctx.clock.now_ns() / 1e9,
-            scan_duration_s=duration,
+            scan_duration_s=ScanDuration(cfg.sim_scan_time_s),
             faults=cfg.sim_faults,
-            on_scan_complete=self._store,
-            inclination_deg=lambda: self._inclination,
+            on_scan_complete=self.card.store,
+            inclination_deg=self.card.inclination,
         )
         self.bus: can.BusABC = BusOffGate(client_bus, self.emulator.bus_off)
         self.emulator.start()
 
-    def _store(self, scan_id: int, profile: ScanProfile) -> None:
-        path = scan_path(self._cfg.storage_dir, scan_id, self.project)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        req = RenderRequest(
-            scan_id=scan_id, path=str(path.resolve()), step_deg=self._cfg.render_step_deg
-        )
-        rep = self._ctx.bus.call(keys.SIM_RENDER, req, timeout=300.0)
-        self._inclination = (math.degrees(rep.pitch), math.degrees(rep.roll))
-        self._ctx.log.info(
-            "scan %d stored: %s (%d points, rendered in %.1f s)",
-            scan_id,
-            rep.path,
-            rep.points,
-            rep.render_s,
-        )
+    @property
+    def project(self) -> str:
+        return self.card.project
+
+    @project.setter
+    def project(self, project: str) -> None:
+        self.card.project = project
+
+    def bus_error(self) -> str:
+        return "bus-off (simulated fault)" if self.emulator.bus_off() else ""
 
     def close(self) -> None:
         self.emulator.stop()

@@ -68,7 +68,9 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
       acknowledges the Initiate of a scan, for that long: it sends and hears nothing
       (the scan itself goes on), and the client's sends fail with
       ``can.CanOperationError``, as python-can reports a bus with no one to
-      acknowledge (see :class:`services.scanner.device.BusOffGate`); once only.
+      acknowledge (see :class:`services.scanner.device.BusOffGate`; across an SLCAN
+      link, :mod:`services.scanner.slcan_device` reports it as an adapter does);
+      once only.
 
     Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;
     for ``bus_off`` the first listed scan to start). A command concerns the scan it

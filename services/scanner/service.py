@@ -20,9 +20,10 @@ from common.messages.scan import (
 from common.service import Context
 from common.transport import RequestError
 from services.scanner.can_codec import RESOLUTION_DIVISORS, ScanProfile, ScanState
+from services.scanner.card import scan_path
 from services.scanner.client import ScannerClient, ScannerError
 from services.scanner.config import ScannerConfig
-from services.scanner.device import BACKENDS, scan_path
+from services.scanner.device import BACKENDS
 
 _STATES = {
     ScanState.IDLE: ScannerState.IDLE,
@@ -46,6 +47,9 @@ class ScannerService:
             status_timeout_s=cfg.status_timeout_s,
         )
         self._lock = threading.Lock()  # the client is single-threaded
+        self._bus_error = ""  # what is wrong with the CAN bus, as last reported
+        # 1 while the bus is failing: a supervisor sees it in health/scanner
+        ctx.bus.report("can_bus_error", lambda: int(bool(self._bus_error)))
         self.status_pub = ctx.bus.publisher(keys.SCANNER_STATUS)
         ctx.bus.serve(keys.SCANNER_CMD, self.handle)
 
@@ -94,10 +98,22 @@ class ScannerService:
             roll=math.radians(inc.roll_deg) if done and inc is not None else 0.0,
         )
 
+    def _report_bus(self) -> None:
+        """Say in one line when the CAN bus fails (bus-off, error passive) and when it
+        is back."""
+        with self._lock:
+            now = self.device.bus_error()
+        if now and now != self._bus_error:
+            self.ctx.log.warning("scanner CAN bus: %s", now)
+        elif self._bus_error and not now:
+            self.ctx.log.info("scanner CAN bus: back")
+        self._bus_error = now
+
     def run(self, stop: threading.Event) -> None:
         last: tuple[ScannerState, str] | None = None
         try:
             for _ in clk.ticks(self.ctx.clock, self.cfg.status_hz, stop):
+                self._report_bus()
                 st = self.status()
                 if (st.state, st.error) != last:
                     log = (
