@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 export MPLBACKEND := Agg
 
-.PHONY: test lint typecheck pytest sim bench results faults soak e2e venv clean
+.PHONY: test lint typecheck pytest sim hil bench results faults soak e2e venv clean
 
 venv: $(STAMP)
 
@@ -32,6 +32,12 @@ test: lint typecheck pytest
 
 sim: $(STAMP)
 	$(BIN)/phenorover sim
+
+# The same survey with every device on its real wire (deploy/hil.toml): gnss, base and
+# scanner run their hardware backends against simulated devices speaking NMEA over
+# TCP, ROS 2 over rmw_zenoh and CAN over SLCAN.
+hil: $(STAMP)
+	$(BIN)/phenorover sim --manifest deploy/hil.toml
 
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[bench]' || echo "open3d not installable here: Embree comparison skipped"

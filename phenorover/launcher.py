@@ -1,7 +1,8 @@
 """``phenorover up``: run the services a manifest lists for this machine.
 
 The launcher hosts this machine's Zenoh router, starts each service as its own
-process (``python -m services.<name> --manifest M``), prefixes their output with the
+process (``python -m services.<name> --manifest M``, or the module
+``services.MODULES`` names), prefixes their output with the
 service name, restarts a service that dies (exponential backoff, logged), and on
 stop sends SIGTERM to all and SIGKILL to whatever is left after ``grace_s``.
 
@@ -31,7 +32,7 @@ from common.config import ConfigError, Manifest, zenoh_config
 from common.process import die_with_parent
 from phenorover.preflight import check_field, check_robot, validate
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
-from services import SERVICES
+from services import SERVICES, module_of
 
 log = logging.getLogger("phenorover.up")
 acl_log = logging.getLogger("phenorover.acl")
@@ -116,7 +117,7 @@ class Launcher:
             self.out.flush()
 
     def _spawn(self, child: Child) -> None:
-        cmd = [sys.executable, "-m", f"services.{child.name}", "--manifest", str(self.path)]
+        cmd = [sys.executable, "-m", module_of(child.name), "--manifest", str(self.path)]
         cmd += self.extra_args.get(child.name, [])
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(

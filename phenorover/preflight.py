@@ -176,9 +176,14 @@ def _gnss(cfg: Any) -> list[Finding]:
 def _base(cfg: Any) -> list[Finding]:
     if cfg.backend == "sim":
         return [Finding("simulated base (from the sim service)")]
+    via = (
+        f"rmw_zenoh (domain {cfg.ros2_domain}, namespace {cfg.ros2_namespace})"
+        if cfg.ros2_layout == "rmw_zenoh"
+        else "zenoh-bridge-ros2dds"
+    )
     return [
         Finding(
-            f"ROS 2 topics through zenoh-bridge-ros2dds: {cfg.ros2_cmd_vel} (Twist out), "
+            f"ROS 2 topics through {via}: {cfg.ros2_cmd_vel} (Twist out), "
             f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in)"
         )
     ]

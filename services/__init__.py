@@ -13,7 +13,26 @@ SERVICES: dict[str, str] = {
     "planner": "services.planner.config:PlannerConfig",
     "mission": "services.mission.config:MissionConfig",
     "viz": "services.viz.config:VizConfig",
+    # device simulators for hardware-in-the-loop runs (deploy/hil.toml): each speaks its
+    # device's own protocol on its own wire, so the hardware backends of gnss, base and
+    # scanner drive the simulated robot unchanged
+    "reach-sim": "services.gnss.reach_sim_config:ReachSimConfig",
+    "husky-sim": "services.base.husky_sim:HuskySimConfig",
+    "faro-sim": "services.scanner.config:FaroSimConfig",
 }
+
+# where a service's process lives when it is not ``services.<name>``
+MODULES: dict[str, str] = {
+    "reach-sim": "services.gnss.reach_sim",
+    "husky-sim": "services.base.husky_sim",
+    "faro-sim": "services.scanner.faro_sim",
+}
+
+
+def module_of(name: str) -> str:
+    """The module ``python -m`` runs for service ``name``."""
+    return MODULES.get(name, f"services.{name}")
+
 
 # Jobs: configured in a manifest like a service (``[services.register]``) but run on
 # demand, by a command or by another service as a child process, so the launcher
