@@ -218,11 +218,41 @@ def _viz(cfg: Any) -> list[Finding]:
     return out or [Finding("no devices")]
 
 
+def _reach_sim(cfg: Any) -> list[Finding]:
+    out = []
+    for o in cfg.outputs:
+        if o.tcp_port is not None:
+            port = o.tcp_port or "a free port"
+            out.append(Finding(f"simulated Reach M2 {o.id}: NMEA TCP server on {cfg.host}:{port}"))
+        if o.pty:
+            out.append(Finding(f"simulated Reach M2 {o.id}: NMEA on a pseudo-terminal at {o.pty}"))
+    return out or [Finding("no outputs")]
+
+
+def _husky_sim(cfg: Any) -> list[Finding]:
+    return [
+        Finding(
+            f"simulated Husky driver: ROS 2 node {cfg.node_name} over rmw_zenoh, domain "
+            f"{cfg.domain_id}: {cfg.cmd_vel} in, {cfg.odom} and {cfg.scan} out"
+        )
+    ]
+
+
+def _faro_sim(cfg: Any) -> list[Finding]:
+    return [
+        Finding(f"simulated FARO: SLCAN on a pseudo-terminal at {cfg.link}"),
+        Finding(f"scan files in {cfg.storage_dir}"),
+    ]
+
+
 DESCRIBE: dict[str, Callable[[Any], list[Finding]]] = {
     "gnss": _gnss,
     "base": _base,
     "scanner": _scanner,
     "viz": _viz,
+    "reach-sim": _reach_sim,
+    "husky-sim": _husky_sim,
+    "faro-sim": _faro_sim,
 }
 
 

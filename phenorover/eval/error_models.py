@@ -12,6 +12,7 @@ from common.config import decode_section, load_manifest
 from common.robot import Robot, load_robot
 from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
+from services.gnss.reach_sim_config import ReachSimConfig
 from services.gnss.rtk_model import STATES, RtkModelConfig, StateNoise
 from services.sim.config import SimConfig
 from services.sim.lidar import LidarConfig
@@ -100,18 +101,23 @@ def lidar(cfg: LidarConfig) -> dict[str, str]:
     }
 
 
-def simulation(sim: SimConfig, gnss: GnssConfig, robot: Robot) -> dict[str, str]:
+def simulation(
+    sim: SimConfig, gnss: GnssConfig, robot: Robot, reach: ReachSimConfig | None = None
+) -> dict[str, str]:
     """Every model of a simulated deployment, with the seeds that drew them; the RTK
-    model only where the receivers are simulated."""
+    model only where the receivers are simulated: by the gnss ``sim`` backend, or by
+    ``reach`` (the simulated Reach M2s a hardware-in-the-loop deployment reads)."""
     w = sim.world
+    receivers = reach if reach is not None else gnss if gnss.backend == "sim" else None
     return {
-        **(rtk(gnss.rtk) if gnss.backend == "sim" else {}),
+        **(rtk(receivers.rtk) if receivers is not None else {}),
         **compass(Compass.of(robot, gnss.compass)),
         **drive(w.robot, w.soil),
         **terrain(w.terrain),
         **faro(w.scanner_noise, sim.inclinometer_sd_deg),
         **lidar(w.lidar),
-        "seeds": f"sim noise {sim.seed}, world (terrain, plants) {w.seed}, receivers {gnss.seed}",
+        "seeds": f"sim noise {sim.seed}, world (terrain, plants) {w.seed}, receivers "
+        f"{(receivers or gnss).seed}",
     }
 
 
@@ -123,4 +129,10 @@ def from_manifest(path: Path) -> dict[str, str]:
     sim = decode_section(m.services.get("sim", {}), SimConfig, "[services.sim]")
     gnss_section = m.services.get("gnss", {"backend": "sim"})
     gnss = decode_section(gnss_section, GnssConfig, "[services.gnss]")
-    return simulation(sim, gnss, load_robot(m.robot))
+    reach_section = m.services.get("reach-sim")
+    reach = (
+        None
+        if reach_section is None
+        else decode_section(reach_section, ReachSimConfig, "[services.reach-sim]")
+    )
+    return simulation(sim, gnss, load_robot(m.robot), reach)
