@@ -135,25 +135,30 @@ def qos_string(qos: Qos) -> str:
     return f"{r}:{d}:,{n}:,:,:,,"
 
 
+def _token(
+    domain_id: int,
+    zid: str,
+    node_id: int,
+    entity_id: int,
+    kind: str,
+    enclave: str,
+    namespace: str,
+    node_name: str,
+    *rest: str,
+) -> str:
+    """The fields every liveliness token starts with (the node's), then ``rest``."""
+    _check_name(node_name)
+    node = [mangle(enclave), mangle(namespace), mangle(node_name)]
+    head = [ADMIN_SPACE, str(domain_id), zid, str(node_id), str(entity_id), kind]
+    return "/".join([*head, *node, *rest])
+
+
 def node_token(
     domain_id: int, zid: str, node_id: int, namespace: str, node_name: str, enclave: str = "/"
 ) -> str:
     """The liveliness token of a node: ``@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/
     <enclave>/<namespace>/<name>`` (names mangled; the root namespace is ``%``)."""
-    _check_name(node_name)
-    return "/".join(
-        [
-            ADMIN_SPACE,
-            str(domain_id),
-            zid,
-            str(node_id),
-            str(node_id),
-            "NN",
-            mangle(enclave),
-            mangle(namespace),
-            mangle(node_name),
-        ]
-    )
+    return _token(domain_id, zid, node_id, node_id, "NN", enclave, namespace, node_name)
 
 
 def endpoint_token(
@@ -172,23 +177,19 @@ def endpoint_token(
 ) -> str:
     """The liveliness token of a publisher (``MP``) or subscription (``MS``): the
     node's fields, then ``<topic>/<type>/<hash>/<qos>`` (13 parts, none empty)."""
-    _check_name(node_name)
-    return "/".join(
-        [
-            ADMIN_SPACE,
-            str(domain_id),
-            zid,
-            str(node_id),
-            str(entity_id),
-            kind,
-            mangle(enclave),
-            mangle(namespace),
-            mangle(node_name),
-            mangle(fq_topic),
-            dds_type_name(ros_type),
-            type_hash,
-            qos_string(qos),
-        ]
+    return _token(
+        domain_id,
+        zid,
+        node_id,
+        entity_id,
+        kind,
+        enclave,
+        namespace,
+        node_name,
+        mangle(fq_topic),
+        dds_type_name(ros_type),
+        type_hash,
+        qos_string(qos),
     )
 
 

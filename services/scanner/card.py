@@ -11,11 +11,13 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import can
+
 from common import keys
 from common.messages.sim import RenderRequest
 from common.service import Context
 from services.scanner.can_codec import ScanProfile
-from services.scanner.emulator import default_scan_duration_s
+from services.scanner.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 # a scan can take minutes to render at fine steps on a small machine
 RENDER_TIMEOUT_S = 300.0
@@ -66,3 +68,18 @@ class RenderedCard:
             rep.points,
             rep.render_s,
         )
+
+
+def emulate(
+    ctx: Context, bus: can.BusABC, card: RenderedCard, faults: FaroFaults, scan_time_s: float | None
+) -> FaroEmulator:
+    """The FARO emulator answering on ``bus``, on the service's clock, its completed scans
+    stored on ``card`` (not started)."""
+    return FaroEmulator(
+        bus,
+        now=lambda: ctx.clock.now_ns() / 1e9,
+        scan_duration_s=ScanDuration(scan_time_s),
+        faults=faults,
+        on_scan_complete=card.store,
+        inclination_deg=card.inclination,
+    )

@@ -15,9 +15,8 @@ import can
 
 from common.config import ConfigError
 from common.service import Context
-from services.scanner.card import RenderedCard, ScanDuration, scan_path
+from services.scanner.card import RenderedCard, emulate, scan_path
 from services.scanner.config import ScannerConfig
-from services.scanner.emulator import FaroEmulator
 from services.scanner.slcan_host import SlcanHost
 
 __all__ = ["BACKENDS", "BusOffGate", "CanDevice", "SimDevice", "scan_path"]
@@ -97,13 +96,8 @@ class SimDevice:
         client_bus = can.Bus(interface="virtual", channel=channel)
         self._device_bus = can.Bus(interface="virtual", channel=channel)
         self.card = RenderedCard(ctx, cfg.storage_dir, cfg.render_step_deg)
-        self.emulator = FaroEmulator(
-            self._device_bus,
-            now=lambda: ctx.clock.now_ns() / 1e9,
-            scan_duration_s=ScanDuration(cfg.sim_scan_time_s),
-            faults=cfg.sim_faults,
-            on_scan_complete=self.card.store,
-            inclination_deg=self.card.inclination,
+        self.emulator = emulate(
+            ctx, self._device_bus, self.card, cfg.sim_faults, cfg.sim_scan_time_s
         )
         self.bus: can.BusABC = BusOffGate(client_bus, self.emulator.bus_off)
         self.emulator.start()

@@ -23,9 +23,8 @@ from pathlib import Path
 from common import keys
 from common.messages.mission import MissionState
 from common.service import Context, run
-from services.scanner.card import RenderedCard, ScanDuration
+from services.scanner.card import RenderedCard, emulate
 from services.scanner.config import FaroSimConfig
-from services.scanner.emulator import FaroEmulator
 from services.scanner.slcan_device import SlcanDevice
 
 
@@ -34,14 +33,7 @@ class FaroSim:
         self.ctx = ctx
         self.card = RenderedCard(ctx, cfg.storage_dir, cfg.render_step_deg)
         self.device = SlcanDevice.open_pty(Path(cfg.link))
-        self.emulator = FaroEmulator(
-            self.device,
-            now=lambda: ctx.clock.now_ns() / 1e9,
-            scan_duration_s=ScanDuration(cfg.scan_time_s),
-            faults=cfg.faults,
-            on_scan_complete=self.card.store,
-            inclination_deg=self.card.inclination,
-        )
+        self.emulator = emulate(ctx, self.device, self.card, cfg.faults, cfg.scan_time_s)
         self.device.bus_off = self.emulator.bus_off
         dev = self.device
         ctx.bus.report("slcan_bad_lines", lambda: dev.bad_lines)
