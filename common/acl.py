@@ -119,6 +119,7 @@ ROLES: dict[Role, Grants] = {
             keys.BASE_ESTOP,
             keys.BASE_ODOM,
             keys.BASE_SCAN,
+            keys.BASE_IMU,
             keys.BASE_STATUS,
             keys.NAV_POSE,
             keys.NAV_PROGRESS,
@@ -147,6 +148,7 @@ SIMULATION_ONLY = _keys(
     keys.SIM_WHEELS,
     keys.SIM_ENCODERS,
     keys.SIM_LIDAR,
+    keys.SIM_IMU,
     keys.SIM_RENDER,
 )
 

@@ -130,6 +130,18 @@ def rot_zyx(roll: float, pitch: float, yaw: float) -> FloatArray:
     )
 
 
+def euler_zyx(r: npt.ArrayLike) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) of a rotation matrix, the inverse of :func:`rot_zyx` (pitch
+    within +-pi/2)."""
+    m = np.asarray(r, dtype=np.float64)
+    pitch = -math.asin(min(1.0, max(-1.0, float(m[2, 0]))))
+    return (
+        math.atan2(float(m[2, 1]), float(m[2, 2])),
+        pitch,
+        math.atan2(float(m[1, 0]), float(m[0, 0])),
+    )
+
+
 def se3(roll: float, pitch: float, yaw: float, t: npt.ArrayLike) -> FloatArray:
     """4x4 homogeneous transform from ZYX angles and a translation (paper eq. 1)."""
     m = np.eye(4)

@@ -73,6 +73,7 @@ SIM_ANTENNAS = Topic(_k("sim/device/antennas"), sim.SimAntennas)
 SIM_WHEELS = Topic(_k("sim/device/wheels"), sim.SimWheelCommand, control=True)
 SIM_ENCODERS = Topic(_k("sim/device/encoders"), sim.SimEncoders)
 SIM_LIDAR = Topic(_k("sim/device/lidar"), base.LaserScan)
+SIM_IMU = Topic(_k("sim/device/imu"), base.Imu)
 SIM_RENDER = Rpc[sim.RenderRequest, sim.RenderReply](
     _k("rpc/sim/render"), sim.RenderRequest, sim.RenderReply
 )
@@ -83,6 +84,7 @@ GNSS_HEADING = Topic(_k("gnss/heading"), gnss.GnssHeading)
 BASE_CMD_VEL = Topic(_k("base/cmd_vel"), base.Twist, control=True)
 BASE_ODOM = Topic(_k("base/odom"), base.Odometry)
 BASE_SCAN = Topic(_k("base/scan"), base.LaserScan)
+BASE_IMU = Topic(_k("base/imu"), base.Imu)
 BASE_ESTOP = Topic(_k("base/estop"), base.EStop, control=True)
 BASE_STATUS = Topic(_k("base/status"), base.BaseStatus)
 
@@ -118,11 +120,13 @@ ALL_TOPICS: tuple[Topic[Any], ...] = (
     SIM_WHEELS,
     SIM_ENCODERS,
     SIM_LIDAR,
+    SIM_IMU,
     GNSS_FIX,
     GNSS_HEADING,
     BASE_CMD_VEL,
     BASE_ODOM,
     BASE_SCAN,
+    BASE_IMU,
     BASE_ESTOP,
     BASE_STATUS,
     NAV_POSE,

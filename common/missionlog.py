@@ -14,8 +14,10 @@ Schema:
   ``started_ns``/``ended_ns`` (scan start and end, clock of the mission service);
   pose statistics over the scan from the navigation estimate: ``mean_x``,
   ``mean_y``, ``mean_z``, ``mean_yaw``, ``sd_x``, ``sd_y``, ``sd_z``, ``sd_yaw``
-  (metres, radians); the inclinometer's ``pitch`` and ``roll`` (radians); ``reason``
-  for a failed or skipped step.
+  (metres, radians); the inclinometer's ``pitch`` and ``roll`` (radians);
+  ``nav_roll`` and ``nav_pitch``, the mean tilt navigation put the antennas' lever arms
+  through over the scan (radians; NULL: a planar estimate, antennas taken upright);
+  ``reason`` for a failed or skipped step.
 - ``events``: ``stamp_ns``, ``level`` (info, warning, error), ``text``.
 """
 
@@ -37,7 +39,8 @@ CREATE TABLE IF NOT EXISTS steps (
     status TEXT NOT NULL DEFAULT 'pending', attempts INTEGER NOT NULL DEFAULT 0,
     file TEXT, started_ns INTEGER, ended_ns INTEGER,
     mean_x REAL, mean_y REAL, mean_z REAL, mean_yaw REAL,
-    sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL, pitch REAL, roll REAL, reason TEXT
+    sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL, pitch REAL, roll REAL, reason TEXT,
+    nav_roll REAL, nav_pitch REAL
 );
 CREATE TABLE IF NOT EXISTS events (
     stamp_ns INTEGER NOT NULL, level TEXT NOT NULL, text TEXT NOT NULL
@@ -80,6 +83,13 @@ class Step:
     pitch: float | None = None
     roll: float | None = None
     reason: str | None = None
+    nav_roll: float | None = None
+    nav_pitch: float | None = None
+
+
+# columns added since the first schema: (name, SQL type), added to an older log that
+# a mission resumes
+ADDED_COLUMNS = (("nav_roll", "REAL"), ("nav_pitch", "REAL"))
 
 
 @dataclasses.dataclass(frozen=True)

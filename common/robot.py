@@ -96,9 +96,8 @@ class LidarMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 
 
 class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """An IMU: its origin in base_link (m) and its orientation (ZYX Euler angles,
-    degrees). No service reads it yet; it is here so that the IMU, when fused, is
-    described where the other sensors are."""
+    """The IMU: its origin in base_link (m) and its orientation (ZYX Euler angles,
+    degrees). Navigation turns the unit's roll and pitch into base_link's with it."""
 
     x: Coord = 0.0
     y: Coord = 0.0
@@ -106,6 +105,18 @@ class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     roll_deg: Angle = 0.0
     pitch_deg: Angle = 0.0
     yaw_deg: Angle = 0.0
+
+    @property
+    def roll_rad(self) -> float:
+        return math.radians(self.roll_deg)
+
+    @property
+    def pitch_rad(self) -> float:
+        return math.radians(self.pitch_deg)
+
+    @property
+    def yaw_rad(self) -> float:
+        return math.radians(self.yaw_deg)
 
 
 class Footprint(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):

@@ -1,4 +1,4 @@
-"""The mobile base: velocity commands, wheel odometry, 2D lidar, e-stop."""
+"""The mobile base: velocity commands, wheel odometry, the IMU, 2D lidar, e-stop."""
 
 from __future__ import annotations
 
@@ -39,6 +39,29 @@ class Odometry(Message, frozen=True, kw_only=True):
     # variances of the increments per metre travelled / per radian turned
     var_v: NonNegative = 0.0
     var_w: NonNegative = 0.0
+
+
+Accel = Annotated[float, msgspec.Meta(ge=-1000.0, le=1000.0)]
+
+
+class Imu(Message, frozen=True, kw_only=True):
+    """An attitude and heading reference system's output, as the Husky's UM7 driver
+    fills sensor_msgs/Imu: the IMU frame's orientation in ZYX Euler angles (rad;
+    roll and pitch against gravity from the unit's own filter, yaw from its
+    magnetometer and not to be trusted beside the motors), its angular velocity
+    (rad/s) and specific force (m/s^2, gravity included), in the IMU frame.
+    ``tilt_var``: the variance the unit states for roll and pitch (rad^2)."""
+
+    roll: Angle
+    pitch: Angle
+    yaw: Angle
+    wx: Velocity = 0.0
+    wy: Velocity = 0.0
+    wz: Velocity = 0.0
+    ax: Accel = 0.0
+    ay: Accel = 0.0
+    az: Accel = 9.80665
+    tilt_var: NonNegative = 0.0
 
 
 class LaserScan(Message, frozen=True, kw_only=True):

@@ -22,7 +22,9 @@ class PoseEstimate(Message, frozen=True, kw_only=True):
 
     ``covariance`` is row-major 3x3 over (x, y, yaw) in m^2, m*rad, rad^2. ``localized``
     turns false when the position uncertainty passes the configured bound; navigation
-    stops while it is false.
+    stops while it is false. ``tilted``: the antennas' lever arms were turned by
+    base_link's ``roll`` and ``pitch`` (rad, from the IMU); false: a planar estimate
+    (no IMU), which puts base_link where the antennas lean.
     """
 
     x: Coordinate
@@ -33,6 +35,9 @@ class PoseEstimate(Message, frozen=True, kw_only=True):
     w: Velocity = 0.0
     covariance: tuple[Finite, ...] = (0.0,) * 9
     localized: bool = False
+    roll: Angle = 0.0
+    pitch: Angle = 0.0
+    tilted: bool = False
 
 
 class Leg(msgspec.Struct, frozen=True, kw_only=True):

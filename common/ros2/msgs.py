@@ -97,6 +97,17 @@ class LaserScan(IdlStruct, typename="sensor_msgs/msg/LaserScan"):
     intensities: sequence[float32]
 
 
+@dataclass
+class Imu(IdlStruct, typename="sensor_msgs/msg/Imu"):
+    header: Header
+    orientation: Quaternion
+    orientation_covariance: array[float64, 9]
+    angular_velocity: Vector3
+    angular_velocity_covariance: array[float64, 9]
+    linear_acceleration: Vector3
+    linear_acceleration_covariance: array[float64, 9]
+
+
 def twist(v: float, w: float) -> Twist:
     """A planar velocity command: ``v`` m/s along x, ``w`` rad/s about z."""
     return Twist(Vector3(v, 0.0, 0.0), Vector3(0.0, 0.0, w))
@@ -110,6 +121,34 @@ def yaw_of(q: Quaternion) -> float:
 def quaternion_of_yaw(yaw: float) -> Quaternion:
     """The unit quaternion of a rotation by ``yaw`` rad about z."""
     return Quaternion(0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+
+
+def quaternion_of_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
+    """The unit quaternion of ZYX Euler angles (rad): yaw about z, then pitch about the
+    new y, then roll about the new x (REP-103's roll, pitch, yaw)."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return Quaternion(
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )
+
+
+def euler_of(q: Quaternion) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll, pitch, yaw; rad) of a quaternion, normalised first (a
+    zero quaternion reads as no rotation). Pitch is in [-pi/2, pi/2]; at +-pi/2 roll
+    and yaw are not separable (gimbal lock)."""
+    x, y, z, w = q.x, q.y, q.z, q.w
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n > 0.0:
+        x, y, z, w = x / n, y / n, z / n, w / n
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
 
 
 def time_of_ns(stamp_ns: int) -> Time:
@@ -164,3 +203,34 @@ def laser_scan(
         ranges=ranges,
         intensities=[],
     )
+
+
+def imu(
+    stamp_ns: int,
+    frame_id: str,
+    rpy: tuple[float, float, float],
+    angular_velocity: tuple[float, float, float],
+    linear_acceleration: tuple[float, float, float],
+    tilt_var: float,
+    yaw_var: float = 0.0,
+    angular_velocity_var: float = 0.0,
+    linear_acceleration_var: float = 0.0,
+) -> Imu:
+    """sensor_msgs/Imu of ``frame_id``'s orientation ``rpy`` (ZYX Euler, rad), its
+    angular velocity (rad/s) and specific force (m/s^2), each x y z. Covariances are
+    diagonal: ``tilt_var`` for roll and pitch, ``yaw_var`` for yaw (rad^2), one
+    variance for each vector's three axes; sensor_msgs reads all zeros as unknown."""
+    return Imu(
+        header=Header(time_of_ns(stamp_ns), frame_id),
+        orientation=quaternion_of_euler(*rpy),
+        orientation_covariance=_diagonal3(tilt_var, tilt_var, yaw_var),
+        angular_velocity=Vector3(*angular_velocity),
+        angular_velocity_covariance=_diagonal3(*(angular_velocity_var,) * 3),
+        linear_acceleration=Vector3(*linear_acceleration),
+        linear_acceleration_covariance=_diagonal3(*(linear_acceleration_var,) * 3),
+    )
+
+
+def _diagonal3(a: float, b: float, c: float) -> list[float]:
+    """A row-major 3x3 covariance (9 values) with ``a``, ``b``, ``c`` on its diagonal."""
+    return [float(a), 0.0, 0.0, 0.0, float(b), 0.0, 0.0, 0.0, float(c)]

@@ -49,3 +49,4 @@ class RosType(Generic[T]):
 TWIST = RosType("geometry_msgs/msg/Twist", msgs.Twist)
 ODOMETRY = RosType("nav_msgs/msg/Odometry", msgs.Odometry)
 LASER_SCAN = RosType("sensor_msgs/msg/LaserScan", msgs.LaserScan)
+IMU = RosType("sensor_msgs/msg/Imu", msgs.Imu)

@@ -54,6 +54,9 @@ TYPE_HASHES: dict[str, str] = {
     "sensor_msgs/msg/LaserScan": (
         "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828"
     ),
+    "sensor_msgs/msg/Imu": (
+        "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
+    ),
 }
 
 EntityKind = Literal["NN", "MP", "MS", "SS", "SC"]

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from common.missionlog import (
+    ADDED_COLUMNS,
     FINISHED,
     SCHEMA,
     STEP_STATES,
@@ -35,6 +36,10 @@ class MissionLog:
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=FULL")  # a power cut must not lose a step
         self.db.executescript(SCHEMA)
+        have = {r[1] for r in self.db.execute("PRAGMA table_info(steps)")}
+        for name, typ in ADDED_COLUMNS:
+            if name not in have:  # a log written before the column existed
+                self.db.execute(f"ALTER TABLE steps ADD COLUMN {name} {typ}")
 
     def close(self) -> None:
         self.db.close()

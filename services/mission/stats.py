@@ -21,3 +21,14 @@ def pose_stats(poses: list[PoseEstimate]) -> dict[str, float]:
     out["mean_yaw"] = math.atan2(s, c)
     out["sd_yaw"] = math.sqrt(max(0.0, -2.0 * math.log(max(math.hypot(c, s), 1e-12))))
     return out
+
+
+def tilt_stats(poses: list[PoseEstimate]) -> dict[str, float | None]:
+    """The mean tilt navigation put the antennas through over a scan (``nav_roll``,
+    ``nav_pitch``, rad); None unless every pose was tilted, since a scan mixing both
+    cannot be undone by one figure."""
+    if not poses or not all(p.tilted for p in poses):
+        return {"nav_roll": None, "nav_pitch": None}
+    n = len(poses)
+    roll, pitch = sum(p.roll for p in poses) / n, sum(p.pitch for p in poses) / n
+    return {"nav_roll": roll, "nav_pitch": pitch}

@@ -39,7 +39,7 @@ from common.transport import Latest, RpcError, RpcTimeout
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
-from services.mission.stats import pose_stats
+from services.mission.stats import pose_stats, tilt_stats
 
 Q = TypeVar("Q")
 R = TypeVar("R")
@@ -354,6 +354,7 @@ class Survey:
             pitch=st.pitch,
             roll=st.roll,
             **stats,
+            **tilt_stats(good),
         )
         return ""
 

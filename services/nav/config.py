@@ -9,6 +9,7 @@ from common.config import ConfigError
 from common.robot import Robot
 from services.nav.ekf import EkfConfig
 from services.nav.follower import FollowerConfig
+from services.nav.tilt import TiltConfig
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
@@ -29,11 +30,13 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``still_after_s``: how long after the last non-zero velocity command the robot is
     taken to stand (the drivetrain's lag is 0.15 s), provided its odometry reads
     still too (within 4 sigma of the encoders' noise); the filter then makes
-    zero-velocity updates.
+    zero-velocity updates. ``tilt``: base_link's roll and pitch from the IMU, which
+    put the antennas' lever arms in 3D (:mod:`services.nav.tilt`).
     """
 
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 20.0
     ekf: EkfConfig = msgspec.field(default_factory=EkfConfig)
+    tilt: TiltConfig = msgspec.field(default_factory=TiltConfig)
     follower: FollowerConfig = msgspec.field(default_factory=FollowerConfig)
     fuse_fix_types: list[str] = msgspec.field(default_factory=lambda: ["FIX"])
     obstacle_distance_m: Pos = 0.6
@@ -54,12 +57,13 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
 @dataclasses.dataclass(frozen=True)
 class Mounts:
     """What navigation uses of the robot description, in base_link (m, rad):
-    ``levers``: (x, y) of antennas 1 and 2, the EKF's planar lever arms;
-    ``antenna_height``: their mean height, taken off a fix's altitude for base_link's
-    ``z``; ``lidar``: (x, y, yaw) of the lidar; ``front``: x of the robot's front."""
+    ``levers``: (x, y, z) of antennas 1 and 2, turned by the tilt into the EKF's
+    planar lever arms and the heights taken off a fix's altitude for base_link's
+    ``z``; ``scanner_yaw``: the scanner's mount yaw (its compensator's axes);
+    ``lidar``: (x, y, yaw) of the lidar; ``front``: x of the robot's front."""
 
-    levers: tuple[tuple[float, float], tuple[float, float]]
-    antenna_height: float
+    levers: tuple[tuple[float, float, float], tuple[float, float, float]]
+    scanner_yaw: float
     lidar: tuple[float, float, float]
     front: float
 
@@ -67,8 +71,8 @@ class Mounts:
     def of(cls, robot: Robot) -> Mounts:
         a1, a2 = robot.antennas
         return cls(
-            levers=((a1.x, a1.y), (a2.x, a2.y)),
-            antenna_height=robot.antenna_height,
+            levers=(a1.xyz, a2.xyz),
+            scanner_yaw=robot.scanner.yaw_rad,
             lidar=(robot.lidar.x, robot.lidar.y, robot.lidar.yaw_rad),
             front=robot.footprint.length / 2.0,
         )

@@ -1,5 +1,6 @@
-"""The nav service's Zenoh shell: localization from odometry, fixes and heading;
-route following from ``rpc/nav/cmd``; pose, progress and velocity commands out."""
+"""The nav service's Zenoh shell: localization from odometry, fixes, heading and the
+IMU's tilt (calibrated by the scanner's compensator); route following from
+``rpc/nav/cmd``; pose, progress and velocity commands out."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import numpy as np
 from common import clock as clk
 from common import keys
 from common.field_geojson import load_frame
-from common.messages.base import LaserScan, Odometry, Twist
+from common.geo import rot_zyx
+from common.messages.base import Imu, LaserScan, Odometry, Twist
 from common.messages.gnss import GnssHeading, NavSatFix
 from common.messages.nav import (
     LEASE_ENDED,
@@ -24,12 +26,14 @@ from common.messages.nav import (
     PoseEstimate,
     RenewRoute,
 )
+from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
 from common.status import parse_token
 from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import Localizer
 from services.nav.follower import Follower
 from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
+from services.nav.tilt import Tilt, tilt_of
 
 
 class NavService:
@@ -40,6 +44,8 @@ class NavService:
         self.frame = load_frame(ctx.field)
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
+        self.tilt = Tilt(cfg.tilt, ctx.robot.imu)
+        self._scan: tuple[int, float] | None = None  # (scan id, when its scan was seen)
         self._lock = threading.Lock()
         self._obstacle = False
         self._obstacle_run = 0  # consecutive scans with an obstacle in the box
@@ -54,12 +60,16 @@ class NavService:
             bus.subscribe(keys.GNSS_FIX.at(antenna=antenna), self._on_fix)
         bus.subscribe(keys.GNSS_HEADING, self._on_heading)
         bus.subscribe(keys.BASE_SCAN, self._on_scan)
+        bus.subscribe(keys.BASE_IMU, self._on_imu)
+        bus.subscribe(keys.SCANNER_STATUS, self._on_scanner)
         bus.serve(keys.NAV_CMD, self.handle)
         self._missions: set[str] = set()  # liveliness tokens of mission supervisors
         bus.watch_alive(self._on_alive)
         c = self.loc.counters
         bus.report("ekf_rejected", lambda: c.rejected)
         bus.report("ekf_resets", lambda: c.resets)
+        bus.report("imu_calibrations", lambda: self.tilt.calibrations)
+        bus.report("imu_rejected", lambda: self.tilt.rejected)
 
     def _on_odom(self, m: Odometry) -> None:
         t = m.stamp_ns / 1e9
@@ -72,22 +82,62 @@ class NavService:
                 and m.w * m.w <= 16.0 * max(m.var_w, 1e-12)
             )
             self.loc.update_odometry(t, m.v, m.w, m.var_v, m.var_w, still=still)
+            self.tilt.motion(t, m.v, m.w)
+
+    def _on_imu(self, m: Imu) -> None:
+        # timed on arrival: an IMU sample says what the tilt is now, and a stamp from
+        # the future must not keep a tilt fresh for ever
+        t = self.ctx.clock.now_ns() / 1e9
+        with self._lock:
+            self.tilt.imu(t, m.roll, m.pitch)
+
+    def _on_scanner(self, m: ScannerStatus) -> None:
+        """At the end of a scan the robot stood still through, the compensator's tilt
+        calibrates the IMU's (see :mod:`services.nav.tilt`)."""
+        t = self.ctx.clock.now_ns() / 1e9
+        with self._lock:
+            if m.state == ScannerState.SCANNING:
+                if self._scan is None or self._scan[0] != m.scan_id:
+                    self._scan = (m.scan_id, t)
+                return
+            if m.state != ScannerState.DONE or self._scan is None or self._scan[0] != m.scan_id:
+                return
+            _, since = self._scan
+            self._scan = None
+            if self._moving_until >= since:
+                return  # moved during the scan: the reading is of another place
+            # the compensator's axes are the scanner's, turned by its mount's yaw
+            mount = rot_zyx(0.0, 0.0, self.mounts.scanner_yaw)
+            roll, pitch = tilt_of(rot_zyx(m.roll, m.pitch, 0.0) @ mount.T)
+            if self.tilt.compensator(t, roll, pitch):
+                b = self.tilt.bias
+                self.ctx.log.info(
+                    "IMU tilt calibrated by the compensator at scan %d: bias roll %.3f, "
+                    "pitch %.3f deg (%d scans)",
+                    m.scan_id,
+                    math.degrees(b[0]),
+                    math.degrees(b[1]),
+                    self.tilt.calibrations,
+                )
 
     def _on_fix(self, m: NavSatFix) -> None:
         if m.fix_type.name not in self.cfg.fuse_fix_types:
             return
         x, y, z = self.frame.wgs84_to_field(m.latitude, m.longitude, m.altitude)
         cov3 = self.frame.enu_cov_to_field(m.position_covariance)
-        lever = self.mounts.levers[m.antenna - 1]
+        mount = self.mounts.levers[m.antenna - 1]
         t = m.stamp_ns / 1e9
+        now = self.ctx.clock.now_ns() / 1e9
         with self._lock:
+            lever = self.tilt.lever(mount, now)
             if self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever):
                 # only a fix the filter took counts: a refused one stamped far in
                 # the future must not keep the robot "localized" for ever
                 self._last_fix = max(self._last_fix, t)
-            # the antennas sit symmetrically about base_link, so their mean height less
-            # the mast is base_link's on a pitched robot too (to 1 - cos(tilt))
-            self.loc.update_height(t, float(z) - self.mounts.antenna_height, float(cov3[2, 2]))
+            # without a tilt the antennas' heights above base_link are taken upright:
+            # they sit symmetrically about it, so the errors cancel in the mean
+            height = self.tilt.height(mount, now)
+            self.loc.update_height(t, float(z) - height, float(cov3[2, 2]))
 
     def _on_heading(self, m: GnssHeading) -> None:
         if m.valid:
@@ -188,6 +238,7 @@ class NavService:
                 self.loc.predict(t)
                 x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
                 localized = self._localized(t)
+                tilt = self.tilt.tilt(t)
                 cmd = self.follower.step(t, x[0], x[1], x[2], localized, self._obstacle)
                 active = self.follower.active
                 if cmd.v or cmd.w:
@@ -205,6 +256,9 @@ class NavService:
                     w=x[4],
                     covariance=tuple(cov.ravel()),
                     localized=localized,
+                    roll=tilt[0] if tilt else 0.0,
+                    pitch=tilt[1] if tilt else 0.0,
+                    tilted=tilt is not None,
                 )
             )
             if active or was_active:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import msgspec
 
+from common.geo import rot_zyx
 from common.messages.plan import PlanResult
 from common.missionlog import MissionLogError, Step, read_log
 from common.poses import F64, PoseError, scanner_pose
@@ -38,9 +39,10 @@ class Placement(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``lever``: the scanner's optical centre in base_link (m). ``mount_yaw_deg``: the
     scanner's zero azimuth from base_link x. ``antenna_height``: the GNSS antennas'
     height above base_link (m) when navigation computes base_link from them with a
-    *planar* lever arm (the EKF does: it has no tilt): on a tilted robot the antennas
+    *planar* lever arm (the EKF without an IMU): on a tilted robot the antennas
     lean ``antenna_height * tilt`` sideways of base_link, which this corrects with the
-    inclinometer's pitch and roll; 0 when navigation already accounts for tilt. All
+    inclinometer's pitch and roll, or, where navigation tilted the lever arms by the
+    IMU (the step's ``nav_roll``, ``nav_pitch``), corrects what the IMU got wrong. All
     three are the robot description's (:meth:`of`).
     """
 
@@ -132,6 +134,11 @@ def nav_pose(step: Step, place: Placement, has_altitude: bool = True) -> F64:
         # the scanner's z axis too (the mount turns only about z); the compensator's
         # pitch and roll hold about the scanner's own yaw, not the base's
         lean = m[:3, 2] * place.antenna_height
+        if step.nav_roll is not None and step.nav_pitch is not None:
+            # navigation took off the lean of the IMU's tilt already: the compensator's
+            # (0.015 deg) replaces it, as what the IMU got wrong
+            imu = rot_zyx(step.nav_roll, step.nav_pitch, yaw)[:, 2] * place.antenna_height
+            lean = lean - imu
         m[:2, 3] -= lean[:2]
     return m
 

@@ -8,6 +8,7 @@ import msgspec
 
 from common.config import ConfigError, load_manifest
 from services.sim.faults import Fault
+from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
 from services.sim.world import WorldConfig
 
@@ -32,6 +33,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``scan_dir``: the only folder rendered scans may be written under (the scanner's
     card); empty: the manifest's ``[services.scanner] storage_dir`` when the manifest
     has one, else the run folder.
+    ``imu``: the Husky's UM7-class IMU (:mod:`services.sim.imu`).
     ``faults``: device faults scheduled in sim time, ``[[services.sim.faults]]`` entries
     (see :mod:`services.sim.faults` and docs/faults.md); simulation only, the truth
     is never touched.
@@ -47,6 +49,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     world: WorldConfig = msgspec.field(default_factory=WorldConfig)
     scan: ScanSettings = msgspec.field(default_factory=ScanSettings)
     inclinometer_sd_deg: Annotated[float, msgspec.Meta(ge=0)] = 0.015
+    imu: ImuConfig = msgspec.field(default_factory=ImuConfig)
     motor_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.25
     resume: bool = True
     snapshot_s: Annotated[float, msgspec.Meta(ge=0, le=3600)] = 0.5

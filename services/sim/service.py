@@ -38,6 +38,7 @@ from common.transport import RequestError
 from services.sim import snapshot
 from services.sim.config import SimConfig
 from services.sim.faults import FaultSchedule, describe
+from services.sim.imu import ImuModel
 from services.sim.lidar import beam_angles
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
@@ -61,6 +62,7 @@ class SimService:
         self.rng = np.random.default_rng(cfg.seed)
         self.sim_ns = 0
         self.faults = FaultSchedule(cfg.faults)
+        self.imu = ImuModel(cfg.imu, cfg.seed, ctx.robot.imu)
         self.snap_path = snapshot.snapshot_path(ctx.run_dir)
         self.world_id = snapshot.fingerprint(layout, fld, cfg.world, ctx.robot)
         if cfg.resume:
@@ -74,6 +76,7 @@ class SimService:
         self.ant_pub = bus.publisher(keys.SIM_ANTENNAS)
         self.enc_pub = bus.publisher(keys.SIM_ENCODERS)
         self.lidar_pub = bus.publisher(keys.SIM_LIDAR)
+        self.imu_pub = bus.publisher(keys.SIM_IMU)
         bus.subscribe(keys.SIM_WHEELS, self._on_wheels)
         bus.serve(keys.SIM_RENDER, self.render)
         angles = beam_angles(cfg.world.lidar)
@@ -206,6 +209,8 @@ class SimService:
                     offset2=fx.offset[1],
                 )
             )
+        if self.cfg.imu.enabled and self._every(self.cfg.imu.rate_hz, k):
+            self.imu_pub.put(self.imu.read(t / NS, s))
         if self._every(self.cfg.truth_hz, k):
             self.truth_pub.put(
                 TruthPose(

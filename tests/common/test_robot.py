@@ -187,7 +187,7 @@ def _localize(truth: np.ndarray, compass: Compass, mounts: Mounts) -> np.ndarray
         loc.update_odometry(t, 0.0, 0.0, 1e-6, 1e-6, still=True)
         loc.update_heading(t, yaw, 0.005)
         for lever, p in zip(mounts.levers, truth, strict=True):
-            loc.update_antenna(t, p[:2], np.eye(2) * 1e-4, lever)
+            loc.update_antenna(t, p[:2], np.eye(2) * 1e-4, lever[:2])
     return loc.x[:3].copy()
 
 
@@ -215,10 +215,9 @@ def test_moving_one_antenna_moves_sim_truth_gnss_and_nav(
     with pytest.raises(BaselineMismatch):
         compass_heading(truth[0], truth[1], COV, COV, Compass.of(husky))
 
-    # nav: the EKF's lever arms and the antenna height follow, so it finds base_link
+    # nav: the EKF's lever arms (heights included) follow, so it finds base_link
     mounts = Mounts.of(moved)
-    assert mounts.levers == ((-0.475, 0.0), (0.60, 0.0))
-    assert mounts.antenna_height == pytest.approx(1.15)
+    assert mounts.levers == ((-0.475, 0.0, 1.10), (0.60, 0.0, 1.20))
     est = _localize(truth, compass, mounts)
     assert est[:2] == pytest.approx([5.0, 3.0], abs=1e-3)
     assert est[2] == pytest.approx(0.4, abs=1e-3)

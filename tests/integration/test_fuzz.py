@@ -25,7 +25,7 @@ from common import keys
 from common.client import wait_alive
 from common.clock import NS
 from common.config import zenoh_config
-from common.messages.base import LaserScan, Odometry
+from common.messages.base import Imu, LaserScan, Odometry
 from common.messages.gnss import GnssHeading, NavSatFix
 from common.messages.mission import MissionStart
 from common.messages.nav import CancelRoute, FollowRoute, Leg
@@ -46,6 +46,7 @@ TOPIC_KEYS = {
     FIX_KEYS[1]: NavSatFix,
     keys.GNSS_HEADING.key: GnssHeading,
     keys.BASE_SCAN.key: LaserScan,
+    keys.BASE_IMU.key: Imu,
     keys.SIM_CLOCK.key: SimClock,
 }
 enc = msgspec.msgpack.encode
@@ -74,6 +75,9 @@ def absurd(rng: random.Random, key: str, now_ns: int) -> bytes:
     elif typ is GnssHeading:
         fields = {"yaw": u(-12, 12), "yaw_sd": rng.choice([0.0, 1e-300, 1e300]), "valid": True}
         fields |= {"baseline_m": 0.95}
+    elif typ is Imu:
+        fields = {"roll": u(-12, 12), "pitch": u(-12, 12), "yaw": 0.0, "ax": u(-1e3, 1e3)}
+        fields |= {"tilt_var": rng.choice([0.0, 1e-30, 1e30])}
     elif typ is LaserScan:
         data = rng.randbytes(rng.choice([0, 8, 12]))  # mostly not what the shape needs
         fields = {"angle_min": -1.0, "angle_max": 1.0, "angle_increment": 0.01}
