@@ -184,7 +184,8 @@ def _base(cfg: Any) -> list[Finding]:
     return [
         Finding(
             f"ROS 2 topics through {via}: {cfg.ros2_cmd_vel} (Twist out), "
-            f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in)"
+            f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in), "
+            f"{cfg.ros2_imu} (Imu in)"
         )
     ]
 
@@ -233,7 +234,7 @@ def _husky_sim(cfg: Any) -> list[Finding]:
     return [
         Finding(
             f"simulated Husky driver: ROS 2 node {cfg.node_name} over rmw_zenoh, domain "
-            f"{cfg.domain_id}: {cfg.cmd_vel} in, {cfg.odom} and {cfg.scan} out"
+            f"{cfg.domain_id}: {cfg.cmd_vel} in, {cfg.odom}, {cfg.scan} and {cfg.imu} out"
         )
     ]
 

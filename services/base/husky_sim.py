@@ -10,7 +10,10 @@ As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
   ``sim/device/encoders`` message: pose integrated from the encoder twist (the
   base service's own dead reckoning), twist = the encoder twist, covariances as
   Clearpath's husky_control configures diff_drive_controller;
-- publishes ``scan`` (sensor_msgs/LaserScan) from ``sim/device/lidar``.
+- publishes ``scan`` (sensor_msgs/LaserScan) from ``sim/device/lidar``;
+- publishes ``imu/data`` (sensor_msgs/Imu) from ``sim/device/imu``, as the Husky's
+  UM7 driver does: roll and pitch variance the simulator's ``tilt_var``, yaw
+  variance ``yaw_var`` (a magnetometer heading beside the motors).
 
 Stamps are on the service clock (the sim clock in a simulated deployment).
 The fault hook (``HuskySim.fault``; SIGUSR1 in the process, SIGUSR2 to undo) makes it
@@ -29,11 +32,11 @@ import msgspec
 import numpy as np
 
 from common import keys
-from common.messages.base import LaserScan
+from common.messages.base import Imu, LaserScan
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import LASER_SCAN, ODOMETRY, TWIST
+from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 from common.service import Context, run
 from services.base.drive import OdometryIntegrator
@@ -42,13 +45,21 @@ Cov6 = tuple[float, float, float, float, float, float]
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
 # husky_control/config/control.yaml (husky_velocity_controller): x y z roll pitch yaw
 HUSKY_COVARIANCE: Cov6 = (0.001, 0.001, 0.001, 0.001, 0.001, 0.03)
+# The UM7's yaw is its magnetometer's, not to be trusted beside the motors: (5 deg)^2.
+IMU_YAW_VAR = math.radians(5.0) ** 2
+# Angular velocity and specific force variances are small constants, per axis: the
+# simulator's IMU message states none. (0.02 rad/s)^2 covers services/sim/imu.py's
+# gyro (0.01 rad/s white, 0.005 rad/s bias); (0.1 m/s^2)^2 a UM7-class accelerometer.
+IMU_GYRO_VAR = 4e-4
+IMU_ACCEL_VAR = 1e-2
 
 
 class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The simulated driver as a ROS 2 node: topics as the base service's
-    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan`` name them, resolved against
-    ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x, y, z,
-    roll, pitch, yaw) the odometry carries."""
+    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu`` name them, resolved
+    against ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x,
+    y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the IMU's yaw variance
+    (rad^2)."""
 
     domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
     namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
@@ -56,10 +67,12 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     cmd_vel: Topic = "cmd_vel"
     odom: Topic = "odom"
     scan: Topic = "scan"
+    imu: Topic = "imu/data"
     odom_frame: str = "odom"
     base_frame: str = "base_link"
     pose_covariance: Cov6 = HUSKY_COVARIANCE
     twist_covariance: Cov6 = HUSKY_COVARIANCE
+    yaw_var: Annotated[float, msgspec.Meta(ge=0)] = IMU_YAW_VAR
 
 
 def covariance(diagonal: Cov6) -> list[float]:
@@ -78,6 +91,21 @@ def scan_to_ros(scan: LaserScan, stamp_ns: int) -> ros.LaserScan:
     )
 
 
+def imu_to_ros(m: Imu, stamp_ns: int, yaw_var: float) -> ros.Imu:
+    """The simulator's IMU as sensor_msgs/Imu, covariances diagonal (see the constants)."""
+    return ros.imu(
+        stamp_ns,
+        m.frame_id,
+        (m.roll, m.pitch, m.yaw),
+        (m.wx, m.wy, m.wz),
+        (m.ax, m.ay, m.az),
+        m.tilt_var,
+        yaw_var=yaw_var,
+        angular_velocity_var=IMU_GYRO_VAR,
+        linear_acceleration_var=IMU_ACCEL_VAR,
+    )
+
+
 class HuskySim:
     def __init__(self, ctx: Context, cfg: HuskySimConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
@@ -90,12 +118,14 @@ class HuskySim:
         self.node = Ros2Node(ctx.bus.session, cfg.node_name, cfg.namespace, cfg.domain_id)
         self._odom_pub = self.node.publisher(cfg.odom, ODOMETRY)
         self._scan_pub = self.node.publisher(cfg.scan, LASER_SCAN, qos=SENSOR_QOS)
+        self._imu_pub = self.node.publisher(cfg.imu, IMU, qos=SENSOR_QOS)
         self._wheels = ctx.bus.publisher(keys.SIM_WHEELS)
         ctx.bus.report("ros2_dropped", lambda: self.node.dropped_total)
         ctx.bus.report("commands_refused", lambda: self.refused)
         self.node.subscribe(cfg.cmd_vel, TWIST, self._on_cmd)
         ctx.bus.subscribe(keys.SIM_ENCODERS, self._on_encoders)
         ctx.bus.subscribe(keys.SIM_LIDAR, self._on_lidar)
+        ctx.bus.subscribe(keys.SIM_IMU, self._on_imu)
 
     def fault(self, silent: bool) -> None:
         """Go silent (the ROS 2 driver gone) or come back."""
@@ -135,6 +165,10 @@ class HuskySim:
     def _on_lidar(self, scan: LaserScan) -> None:
         if not self.silent:
             self._scan_pub.put(scan_to_ros(scan, self.ctx.clock.now_ns()))
+
+    def _on_imu(self, m: Imu) -> None:
+        if not self.silent:
+            self._imu_pub.put(imu_to_ros(m, self.ctx.clock.now_ns(), self.cfg.yaw_var))
 
     def run(self, stop: threading.Event) -> None:
         stop.wait()

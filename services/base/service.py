@@ -1,5 +1,5 @@
 """The base service's Zenoh shell: velocity commands in (through the watchdog and the
-e-stop), wheel odometry, lidar and status out."""
+e-stop), wheel odometry, the IMU, lidar and status out."""
 
 from __future__ import annotations
 
@@ -24,9 +24,10 @@ class BaseService:
         self._lock = threading.Lock()
         self.odom_pub = ctx.bus.publisher(keys.BASE_ODOM)
         self.scan_pub = ctx.bus.publisher(keys.BASE_SCAN)
+        self.imu_pub = ctx.bus.publisher(keys.BASE_IMU)
         self.status_pub = ctx.bus.publisher(keys.BASE_STATUS)
         self.drive = BACKENDS[cfg.backend](
-            cfg, ctx.bus, self._on_encoders, self._on_odom, self._on_scan
+            cfg, ctx.bus, self._on_encoders, self._on_odom, self._on_scan, self.imu_pub.put
         )
         ctx.bus.subscribe(keys.BASE_CMD_VEL, self._on_cmd)
         ctx.bus.subscribe(keys.BASE_ESTOP, self._on_estop)

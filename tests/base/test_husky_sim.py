@@ -1,7 +1,7 @@
 """The simulated Husky ROS 2 driver and the base service's ``ros2`` backend as
-processes, with the test as the simulator (encoders and lidar in, wheels out): the
-base's odometry comes through the driver, its commands reach the simulated wheels,
-and a silent driver stops them."""
+processes, with the test as the simulator (encoders, lidar and IMU in, wheels out):
+the base's odometry, scans and IMU come through the driver, its commands reach the
+simulated wheels, and a silent driver stops them."""
 
 from __future__ import annotations
 
@@ -11,19 +11,20 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import zenoh
 
 from common import keys
 from common.client import wait_alive
 from common.config import zenoh_config
-from common.messages.base import LaserScan, Twist
+from common.messages.base import Imu, LaserScan, Twist
 from common.messages.core import Array
 from common.messages.sim import SimEncoders
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import ODOMETRY, TWIST
+from common.ros2.types import IMU, ODOMETRY, TWIST
 from common.transport import Bus
-from services.base.husky_sim import HUSKY_COVARIANCE
+from services.base.husky_sim import HUSKY_COVARIANCE, IMU_YAW_VAR
 from tests.conftest import Procs, Record, record
 
 
@@ -32,6 +33,7 @@ def test_base_drives_the_simulated_husky(
 ) -> None:
     odom = record(client_bus, keys.BASE_ODOM)
     scans = record(client_bus, keys.BASE_SCAN)
+    imus = record(client_bus, keys.BASE_IMU)
     wheels = record(client_bus, keys.SIM_WHEELS)
     health = record(client_bus, keys.HEALTH.at(service="base"))
     husky = procs.service("services.base.husky_sim", router_endpoint, log=tmp_path / "husky.log")
@@ -45,7 +47,9 @@ def test_base_drives_the_simulated_husky(
     spy = Ros2Node(spy_session, "spy")
     ros_odom: Record[ros.Odometry] = Record()
     ros_cmd: Record[ros.Twist] = Record()
+    ros_imu: Record[ros.Imu] = Record()
     spy.subscribe("odom", ODOMETRY, ros_odom.add)
+    spy.subscribe("imu/data", IMU, ros_imu.add)
     spy.subscribe("cmd_vel", TWIST, ros_cmd.add)
 
     # the simulator's encoders at 20 Hz, 1 m/s straight (the test's input)
@@ -86,6 +90,26 @@ def test_base_drives_the_simulated_husky(
                 break
         s = scans.wait_for(lambda s: s.frame_id == "lidar", timeout=1.0)
         assert s is not None and s.ranges.numpy()[0] == 2.0 and np.isinf(s.ranges.numpy()[1])
+
+        # sim/device/imu -> the driver's imu/data (sensor_msgs/Imu) -> base/imu
+        imu = client_bus.publisher(keys.SIM_IMU)
+        sim_imu = Imu(
+            stamp_ns=1, frame_id="imu_link", roll=0.05, pitch=-0.1, yaw=2.0,
+            wx=0.01, wy=-0.02, wz=0.3, ax=0.2, ay=-0.1, az=9.8, tilt_var=3e-4,
+        )  # fmt: skip
+        for _ in range(50):
+            imu.put(sim_imu)
+            if imus.until(bool, timeout=0.1):
+                break
+        i = imus.wait_for(lambda i: i.frame_id == "imu_link", timeout=1.0)
+        assert i is not None, "the simulator's IMU never reached base/imu"
+        assert [i.roll, i.pitch, i.yaw] == pytest.approx([0.05, -0.1, 2.0], abs=1e-12)
+        assert (i.wx, i.wy, i.wz, i.ax, i.ay, i.az) == (0.01, -0.02, 0.3, 0.2, -0.1, 9.8)
+        assert i.tilt_var == pytest.approx(3e-4) and i.stamp_ns > 1  # the driver's stamp
+        ri = ros_imu.wait_for(lambda m: m.header.frame_id == "imu_link", timeout=2.0)
+        assert ri is not None
+        cov = np.asarray(ri.orientation_covariance).tolist()
+        assert cov[::4] == pytest.approx([3e-4, 3e-4, IMU_YAW_VAR]) and cov[1:4] == [0.0] * 3
 
         # base/cmd_vel -> rmw_zenoh cmd_vel -> the driver -> sim/device/wheels
         cmd = client_bus.publisher(keys.BASE_CMD_VEL)

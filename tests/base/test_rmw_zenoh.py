@@ -23,14 +23,14 @@ from common.config import zenoh_config
 from common.ros2 import msgs as ros
 from common.ros2 import wire
 from common.ros2.node import Ros2Node
-from common.ros2.types import LASER_SCAN, ODOMETRY, TWIST, RosType
+from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST, RosType
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 ZID = "4b33868af7b46327b80673b0f621d09b"
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
 
 
-@pytest.mark.parametrize("rtype", [TWIST, ODOMETRY, LASER_SCAN], ids=lambda t: t.name)
+@pytest.mark.parametrize("rtype", [TWIST, ODOMETRY, LASER_SCAN, IMU], ids=lambda t: t.name)
 def test_type_hashes_are_rosbags_rihs01(rtype: RosType[object]) -> None:
     assert rtype.type_hash == JAZZY.hash_rihs01(rtype.name)
 
@@ -179,6 +179,29 @@ def test_rosbags_cdr_decodes_here() -> None:
     assert ros.ns_of_time(o.header.stamp) == 3_000_000_007 and o.child_frame_id == "base_link"
     assert o.pose.pose.position.y == 2.0 and o.twist.twist.angular.z == 0.2
     assert np.asarray(o.pose.covariance).tolist() == list(range(36))
+
+
+def test_imu_cdr_is_rosbags_cdr() -> None:
+    m = ros.imu(
+        1_700_000_000_250_000_000, "imu_link", (0.1, -0.2, 3.0), (0.01, -0.02, 0.3),
+        (0.5, -0.1, 9.7), 2e-4, yaw_var=7e-3, angular_velocity_var=4e-4,
+        linear_acceleration_var=1e-2,
+    )  # fmt: skip
+    data = IMU.encode(m)
+    back: Any = JAZZY.deserialize_cdr(data, IMU.name)
+    assert (back.header.stamp.sec, back.header.stamp.nanosec) == (1_700_000_000, 250_000_000)
+    assert back.header.frame_id == "imu_link"
+    q, o = back.orientation, m.orientation
+    assert (q.x, q.y, q.z, q.w) == (o.x, o.y, o.z, o.w)
+    assert list(back.orientation_covariance) == [2e-4, 0, 0, 0, 2e-4, 0, 0, 0, 7e-3]
+    assert (back.angular_velocity.x, back.angular_velocity.z) == (0.01, 0.3)
+    assert list(back.angular_velocity_covariance)[::4] == [4e-4] * 3
+    assert (back.linear_acceleration.y, back.linear_acceleration.z) == (-0.1, 9.7)
+    assert list(back.linear_acceleration_covariance)[::4] == [1e-2] * 3
+    # and back: rosbags' bytes are ours, byte for byte
+    assert bytes(JAZZY.serialize_cdr(back, IMU.name)) == data
+    again = IMU.decode(bytes(JAZZY.serialize_cdr(back, IMU.name)))
+    assert ros.euler_of(again.orientation) == pytest.approx((0.1, -0.2, 3.0), abs=1e-12)
 
 
 @pytest.fixture

@@ -1,19 +1,23 @@
-"""The ``ros2`` backend's own logic: the odometry watch, and the zenoh-bridge-ros2dds
-layout kept beside rmw_zenoh's."""
+"""The ``ros2`` backend's own logic: the odometry watch, the IMU's conversion and
+refusal of bad values, and the zenoh-bridge-ros2dds layout kept beside rmw_zenoh's."""
 
 from __future__ import annotations
 
+import logging
+import math
 import threading
 
 import msgspec
 import pytest
 
 from common.config import ConfigError, decode_section
+from common.messages.base import Imu
 from common.ros2 import msgs as ros
 from common.transport import Bus
-from services.base.backends import OdomWatch, Ros2Base, decode_odometry
+from services.base.backends import OdomWatch, Ros2Base, decode_odometry, imu_from_ros
 from services.base.config import BaseConfig
 from services.base.husky_sim import HuskySimConfig
+from tests.conftest import Record
 
 MS = 1_000_000
 
@@ -48,7 +52,7 @@ def test_bridge_layout_uses_plain_keys(client_bus: Bus) -> None:
         odom.append(a)  # type: ignore[arg-type]
         got.set()
 
-    base = Ros2Base(cfg, client_bus, lambda *_: None, on_odom, lambda _: None)
+    base = Ros2Base(cfg, client_bus, lambda *_: None, on_odom, lambda _: None, lambda _: None)
     cmds: list[ros.Twist] = []
     sent = threading.Event()
 
@@ -63,3 +67,63 @@ def test_bridge_layout_uses_plain_keys(client_bus: Bus) -> None:
     client_bus.put_raw("odom", o.serialize())
     assert got.wait(5.0) and odom[-1][:3] == (7, 1.0, 2.0)
     assert decode_odometry(o.serialize()).child_frame_id == "base_link"
+
+
+def _imu(roll: float = 0.1, wx: float = 0.01, tilt_var: float = 3e-4) -> ros.Imu:
+    return ros.imu(
+        1_000_000_007, "imu_link", (roll, -0.2, 2.5), (wx, 0.02, -0.3), (0.5, -0.1, 9.7), tilt_var,
+        yaw_var=0.0076,
+    )  # fmt: skip
+
+
+def test_imu_from_ros() -> None:
+    m = imu_from_ros(ros.Imu.deserialize(_imu().serialize()))
+    assert (m.stamp_ns, m.frame_id) == (1_000_000_007, "imu_link")
+    assert [m.roll, m.pitch, m.yaw] == pytest.approx([0.1, -0.2, 2.5], abs=1e-12)
+    assert (m.wx, m.wy, m.wz, m.ax, m.ay, m.az) == (0.01, 0.02, -0.3, 0.5, -0.1, 9.7)
+    assert m.tilt_var == pytest.approx(3e-4)
+    # the bus message it becomes decodes: its bounds hold
+    assert msgspec.msgpack.decode(msgspec.msgpack.encode(m), type=Imu) == m
+
+    r = _imu()
+    r.orientation_covariance[4] = 1e-4  # type: ignore[index]
+    assert imu_from_ros(r).tilt_var == pytest.approx(2e-4)
+    r.orientation_covariance[0] = -1.0  # type: ignore[index] # sensor_msgs: no orientation
+    with pytest.raises(ValueError, match="no orientation"):
+        imu_from_ros(r)
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        _imu(roll=math.nan),
+        _imu(wx=math.inf),
+        _imu(wx=-math.nan),
+        _imu(wx=1e3),  # finite, but outside the bus message's bounds
+        _imu(tilt_var=math.inf),
+    ],
+    ids=["nan-orientation", "inf-rate", "nan-rate", "rate-out-of-bounds", "inf-variance"],
+)
+def test_imu_from_ros_refuses_bad_values(bad: ros.Imu) -> None:
+    with pytest.raises(ValueError):
+        imu_from_ros(bad)
+
+
+def test_bridge_layout_imu_drops_bad_messages(
+    client_bus: Bus, caplog: pytest.LogCaptureFixture
+) -> None:
+    cfg = BaseConfig(backend="ros2", ros2_layout="bridge", ros2_imu="t/imu")
+    imus: Record[Imu] = Record()
+    base = Ros2Base(cfg, client_bus, lambda *_: None, lambda *_: None, lambda _: None, imus.add)
+    with caplog.at_level(logging.WARNING):
+        client_bus.put_raw("t/imu", _imu(roll=math.nan).serialize())
+        client_bus.put_raw("t/imu", _imu(wx=math.inf).serialize())
+        client_bus.put_raw("t/imu", b"\x00\x01\x00\x00\x01")  # not CDR
+        client_bus.put_raw("t/imu", _imu(roll=0.25).serialize())
+        # one publisher, one key: in order, so the good one arrives after the bad ones
+        assert imus.until(bool, timeout=5.0)
+    assert len(imus) == 1 and imus[0].roll == pytest.approx(0.25)
+    assert base.imu_refused == 2 and client_bus.reports()["ros2_imu_refused"] == 2
+    assert client_bus.decode_stats.by_key == {"t/imu": 1}
+    refused = [r for r in caplog.records if "IMU from the ROS 2 base refused" in r.message]
+    assert len(refused) == 1 and "orientation" in refused[0].message, caplog.text

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from common.ros2 import msgs as ros
+from common.ros2.types import IMU
 from services.base.backends import decode_odometry, scan_from_ros
 
 
@@ -64,3 +65,50 @@ def test_laser_scan_out_of_range_becomes_inf() -> None:
     r = scan.ranges.numpy()
     assert r[0] == pytest.approx(1.0) and np.isinf(r[1]) and np.isinf(r[2])
     assert r[3] == pytest.approx(4.9) and scan.frame_id == "laser"
+
+
+def test_imu_bytes_are_ros2_cdr_and_round_trip() -> None:
+    m = ros.imu(
+        2_000_000_300, "imu_link", (0.1, -0.2, 0.3), (0.01, 0.02, 0.03), (0.4, 0.5, 9.8), 1e-4,
+        yaw_var=7e-3, angular_velocity_var=4e-4, linear_acceleration_var=1e-2,
+    )  # fmt: skip
+    data = IMU.encode(m)
+    # header (stamp, frame_id "imu_link" + NUL), padded to 8, then 4 + 9 + 3 + 9 + 3 + 9
+    # float64
+    frame = b"imu_link\x00"
+    head = b"\x00\x01\x00\x00" + struct.pack("<iII", 2, 300, len(frame)) + frame
+    head += b"\x00" * (-len(head[4:]) % 8)
+    assert data[: len(head)] == head and len(data) == len(head) + 37 * 8
+    f = struct.unpack_from("<37d", data, len(head))
+    q = f[0:4]
+    assert math.isclose(math.fsum(c * c for c in q), 1.0)
+    assert f[4:13] == (1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 7e-3)
+    assert f[13:16] == (0.01, 0.02, 0.03) and f[16:25][::4] == (4e-4,) * 3
+    assert f[25:28] == (0.4, 0.5, 9.8) and f[28:37][::4] == (1e-2,) * 3
+    back = IMU.decode(data)
+    assert back == ros.Imu.deserialize(data)
+    assert back.header.frame_id == "imu_link" and ros.ns_of_time(back.header.stamp) == 2_000_000_300
+    cov = np.asarray(back.orientation_covariance).tolist()
+    assert cov == np.asarray(m.orientation_covariance).tolist()
+    assert ros.euler_of(back.orientation) == pytest.approx((0.1, -0.2, 0.3), abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    "rpy",
+    [(0.0, 0.0, 0.0), (0.1, -0.2, 0.3), (-3.0, 1.2, -2.9), (0.5, -1.5, 3.1), (3.14, 0.0, -3.14)],
+)
+def test_euler_round_trips_through_quaternion(rpy: tuple[float, float, float]) -> None:
+    q = ros.quaternion_of_euler(*rpy)
+    assert ros.euler_of(q) == pytest.approx(rpy, abs=1e-9)
+    # yaw alone agrees with the planar helpers; a scaled quaternion is the same rotation
+    assert ros.quaternion_of_euler(0.0, 0.0, rpy[2]) == ros.quaternion_of_yaw(rpy[2])
+    assert math.isclose(ros.yaw_of(ros.quaternion_of_yaw(rpy[2])), rpy[2], abs_tol=1e-12)
+    scaled = ros.Quaternion(2 * q.x, 2 * q.y, 2 * q.z, 2 * q.w)
+    assert ros.euler_of(scaled) == pytest.approx(rpy, abs=1e-9)
+
+
+def test_euler_of_a_known_rotation() -> None:
+    # 45 deg about y is pitch alone; a zero quaternion reads as no rotation
+    q = ros.Quaternion(0.0, math.sin(math.pi / 8), 0.0, math.cos(math.pi / 8))
+    assert ros.euler_of(q) == pytest.approx((0.0, math.pi / 4, 0.0))
+    assert ros.euler_of(ros.Quaternion(0.0, 0.0, 0.0, 0.0)) == (0.0, 0.0, 0.0)

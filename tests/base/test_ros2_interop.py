@@ -1,8 +1,9 @@
 """The base service's ``ros2`` backend (rmw_zenoh layout) against a ROS 2 peer we did
 not write: zenoh-ros2-sdk (pure-Python ROS 2 over rmw_zenoh, with its own key, type
-hash, token and CDR code via rosbags) publishes Odometry and LaserScan that the base
-turns into its own topics, subscribes the Twist the base sends, and lists the base's
-topics from its liveliness tokens as ``ros2 topic list`` would."""
+hash, token and CDR code via rosbags) publishes Odometry, LaserScan and Imu that the
+base turns into its own topics, subscribes the Twist the base sends, and lists the
+base's topics from its liveliness tokens as ``ros2 topic list`` would; and it decodes
+the sensor_msgs/Imu our node publishes (what the simulated Husky driver sends)."""
 
 from __future__ import annotations
 
@@ -22,8 +23,12 @@ from zenoh_ros2_sdk.session import ZenohSession
 from common import keys
 from common.client import wait_alive
 from common.messages.base import Twist
+from common.ros2 import msgs as ros
+from common.ros2.node import Ros2Node
+from common.ros2.types import IMU
+from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
-from tests.conftest import Procs, record
+from tests.conftest import Procs, Record, record
 
 MSGS = Path(__file__).resolve().parent.parent / "data" / "ros2_msgs"
 
@@ -48,6 +53,7 @@ def test_base_and_zenoh_ros2_sdk_interoperate(
 ) -> None:
     odom = record(client_bus, keys.BASE_ODOM)
     scans = record(client_bus, keys.BASE_SCAN)
+    imus = record(client_bus, keys.BASE_IMU)
     procs.service(
         "services.base", router_endpoint, "--set", "backend=ros2", log=tmp_path / "base.log"
     )
@@ -55,6 +61,8 @@ def test_base_and_zenoh_ros2_sdk_interoperate(
 
     odom_pub = ROS2Publisher("/odom", "nav_msgs/msg/Odometry", router_port=sdk_port)
     scan_pub = ROS2Publisher("/scan", "sensor_msgs/msg/LaserScan", router_port=sdk_port)
+    imu_pub = ROS2Publisher("/imu/data", "sensor_msgs/msg/Imu", router_port=sdk_port)
+    assert imu_pub.type_hash == IMU.type_hash  # the SDK's own RIHS01 of tests/data's .msg
     twists: list[Any] = []
     got_twist = threading.Condition()
 
@@ -129,6 +137,27 @@ def test_base_and_zenoh_ros2_sdk_interoperate(
         r = s.ranges.numpy()
         assert r[0] == np.float32(1.5) and np.isinf(r[1]) and np.isinf(r[2])
 
+        vec, quat = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"]
+        q = ros.quaternion_of_euler(0.1, -0.05, 1.0)
+        cov = np.array([1e-4, 0, 0, 0, 3e-4, 0, 0, 0, 0.01])
+        for _ in range(50):
+            imu_pub.publish(
+                header=header(0, "imu_link"),
+                orientation=quat(x=q.x, y=q.y, z=q.z, w=q.w),
+                orientation_covariance=cov,
+                angular_velocity=vec(x=0.01, y=0.0, z=0.2),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=vec(x=0.3, y=0.0, z=9.8),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            if imus.until(bool, timeout=0.1):
+                break
+        i = imus.wait_for(lambda i: i.frame_id == "imu_link", timeout=1.0)
+        assert i is not None, "the base never turned the SDK's Imu into base/imu"
+        assert [i.roll, i.pitch, i.yaw] == pytest.approx([0.1, -0.05, 1.0], abs=1e-12)
+        assert (i.wz, i.ax, i.az) == (0.2, 0.3, 9.8) and i.tilt_var == pytest.approx(2e-4)
+        assert i.stamp_ns == 100 * 1_000_000_000 + 500
+
         cmd = client_bus.publisher(keys.BASE_CMD_VEL)
         assert cmd.wait_matched(10)
         with got_twist:
@@ -146,8 +175,39 @@ def test_base_and_zenoh_ros2_sdk_interoperate(
         assert "geometry_msgs/msg/Twist" in topics["/cmd_vel"]
         assert "nav_msgs/msg/Odometry" in topics["/odom"]
         assert "sensor_msgs/msg/LaserScan" in topics["/scan"]
+        assert "sensor_msgs/msg/Imu" in topics["/imu/data"]
     finally:
         stop.set()
         feeder.join()
-        for h in (odom_pub, scan_pub, twist_sub):
+        for h in (odom_pub, scan_pub, imu_pub, twist_sub):
             h.close()
+
+
+def test_zenoh_ros2_sdk_decodes_our_imu(client_bus: Bus, sdk_port: int) -> None:
+    got: Record[Any] = Record()
+    sub = ROS2Subscriber("/imu/data", "sensor_msgs/msg/Imu", got.add, router_port=sdk_port)
+    node = Ros2Node(client_bus.session, "husky_node")
+    pub = node.publisher("imu/data", IMU, qos=SENSOR_QOS)
+    msg = ros.imu(
+        7_000_000_123, "imu_link", (0.1, -0.2, 3.0), (0.01, -0.02, 0.3), (0.5, -0.1, 9.7),
+        2e-4, yaw_var=7e-3, angular_velocity_var=4e-4, linear_acceleration_var=1e-2,
+    )  # fmt: skip
+    try:
+        for _ in range(100):  # until the SDK's subscription is matched
+            pub.put(msg)
+            if got.until(bool, timeout=0.1):
+                break
+        m = got.wait_for(lambda m: True, timeout=1.0)
+        assert m is not None, "the SDK never decoded our sensor_msgs/Imu"
+        assert (m.header.stamp.sec, m.header.stamp.nanosec) == (7, 123)
+        assert m.header.frame_id == "imu_link"
+        o = m.orientation
+        assert (o.x, o.y, o.z, o.w) == (
+            msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w,
+        )  # fmt: skip
+        assert list(m.orientation_covariance) == [2e-4, 0, 0, 0, 2e-4, 0, 0, 0, 7e-3]
+        assert (m.angular_velocity.z, m.linear_acceleration.z) == (0.3, 9.7)
+        assert list(m.linear_acceleration_covariance)[::4] == [1e-2] * 3
+    finally:
+        sub.close()
+        node.close()
