@@ -291,18 +291,27 @@ class Localizer:
         return self._update(t, "odometry", z, lambda x: h @ x, lambda x: h, r, (3, 4))
 
     def update_antenna(
-        self, t: float, xy: npt.ArrayLike, cov: npt.ArrayLike, lever: tuple[float, float]
+        self,
+        t: float,
+        xy: npt.ArrayLike,
+        cov: npt.ArrayLike,
+        lever: tuple[float, float],
+        name: str = "",
     ) -> bool:
         """One antenna's horizontal position in the field frame (m) with its 2x2
-        covariance (m^2); ``lever`` is its (x, y) offset in base_link."""
+        covariance (m^2); ``lever`` is its (x, y) offset in base_link. ``name`` tells
+        the antennas apart (default: by lever): the correlation of its fixes over
+        time and a run of its rejections are counted per antenna, so a lever that
+        changes with the robot's tilt must not make each fix a stranger."""
+        kind = f"antenna {name or lever}"
         p_xy, r, bad = check_antenna(xy, cov, self.cfg.min_fix_sd_m)
-        if not self._admit(f"antenna {lever}", t, bad):
+        if not self._admit(kind, t, bad):
             return False
         if not self._have_position:
             self._initialize_position(p_xy, lever)
             return self._check()
         hx, jac = antenna_model(lever, self._lag(t))
-        return self._update(t, f"antenna {lever}", p_xy, hx, jac, r, (0, 1))
+        return self._update(t, kind, p_xy, hx, jac, r, (0, 1))
 
     def update_heading(self, t: float, yaw: float, sd: float) -> bool:
         """The GNSS-compass heading (rad, field frame) with its 1-sigma (rad)."""

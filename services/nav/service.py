@@ -130,7 +130,8 @@ class NavService:
         now = self.ctx.clock.now_ns() / 1e9
         with self._lock:
             lever = self.tilt.lever(mount, now)
-            if self.loc.update_antenna(t, np.array([float(x), float(y)]), cov3[:2, :2], lever):
+            xy = np.array([float(x), float(y)])
+            if self.loc.update_antenna(t, xy, cov3[:2, :2], lever, name=str(m.antenna)):
                 # only a fix the filter took counts: a refused one stamped far in
                 # the future must not keep the robot "localized" for ever
                 self._last_fix = max(self._last_fix, t)

@@ -147,3 +147,24 @@ def test_registration_replaces_the_imus_lean_by_the_compensators() -> None:
     want = body_to_field(s, np.array(robot.scanner.xyz))
     for step in (tilted, planar):
         assert nav_pose(step, place)[:3, 3] == pytest.approx(want, abs=1e-4)
+
+
+def test_an_antenna_whose_tilted_lever_changes_every_fix_is_still_one_antenna() -> None:
+    """The filter counts a run of rejections per antenna: after a real jump (0.3 m)
+    it re-initialises from the agreeing fixes even though the tilt moves the lever a
+    little at every fix."""
+    loc = Localizer(EkfConfig())
+    lever = MOUNTS.levers[1]
+    t = 0.0
+    for k in range(100):
+        t = 0.1 * k
+        loc.update_odometry(t, 0.0, 0.0, 1e-6, 1e-6, still=True)
+        loc.update_heading(t, 0.0, 0.005)
+        loc.update_antenna(t, np.array([lever[0], 0.0]), np.eye(2) * 1e-4, lever[:2], name="2")
+    for k in range(40):  # not standing: a run of 10 re-initialises
+        t += 0.1
+        loc.update_odometry(t, 0.0, 0.0, 1e-6, 1e-6, still=False)
+        loc.update_heading(t, 0.0, 0.005)
+        wobble = (lever[0], 1e-4 * math.sin(k))  # a lever the IMU's noise moves
+        loc.update_antenna(t, np.array([lever[0] + 0.3, 0.0]), np.eye(2) * 1e-4, wobble, name="2")
+    assert loc.x[0] == pytest.approx(0.3, abs=0.02)
