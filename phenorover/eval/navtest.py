@@ -27,6 +27,7 @@ from common.messages.sim import TruthPose
 from common.process import free_loopback_port
 from common.transport import Bus, RpcError
 from phenorover.eval import experiments as ex
+from phenorover.eval import profiles
 
 SERVICES = ("sim", "base", "gnss", "nav")
 
@@ -39,11 +40,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hold", type=float, default=420.0, help="stationary: seconds held (sim)")
     p.add_argument("--out", type=Path, default=None, help="output folder (runs/nav-EXPERIMENT)")
     p.add_argument("--seed", type=int, default=None, help="the world's and receivers' seed")
+    p.add_argument(
+        "--profile",
+        choices=sorted(profiles.PROFILES),
+        default="ours",
+        help="navigation: ours (the shipped defaults) or paper (the paper's method)",
+    )
 
 
-def _manifest(src: Path, rtf: float, out: Path, seed: int | None = None) -> Path:
+def _manifest(
+    src: Path, rtf: float, out: Path, seed: int | None = None, profile: str = "ours"
+) -> Path:
     with src.open("rb") as f:
-        m: dict[str, Any] = tomllib.load(f)
+        m: dict[str, Any] = profiles.apply(tomllib.load(f), profile)
     m["services"] = {k: v for k, v in m["services"].items() if k in SERVICES}
     m["services"].setdefault("sim", {})["real_time_factor"] = rtf
     if seed is not None:  # another draw of terrain, slip and receiver errors
@@ -141,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out or Path("runs") / f"nav-{args.experiment}"
     out.mkdir(parents=True, exist_ok=True)
-    manifest = _manifest(args.manifest, args.rtf, out, args.seed)
+    manifest = _manifest(args.manifest, args.rtf, out, args.seed, args.profile)
     launcher = Launcher(manifest)
     with launcher, open_client(manifest, []) as session:
         bus = Bus(session, "nav-test")
@@ -162,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
     # the models in force are those of the effective manifest beside this file (the
     # simulator's and receivers' defaults where it sets none)
     stats["error_models"] = str(manifest)
+    stats["profile"] = args.profile
     (out / "stats.json").write_text(json.dumps(stats, indent=1))
     print(json.dumps(stats, indent=1))
     return 0

@@ -30,6 +30,7 @@ from phenorover.eval.results import (
 #: The benchmarks `make bench` runs (tests/bench/bench_*.py), in the page's order.
 BENCHMARKS = {
     "bench_nav": "Navigation: the paper's experiments in the simulator",
+    "bench_profiles": "The paper's method against ours, same simulated world, several seeds",
     "bench_registration": "Registration: the simulated ENGR survey",
     "bench_planner": "Planning: visibility, cover and tour",
     "bench_devices": "Devices: GNSS compass and simulated FARO scans",

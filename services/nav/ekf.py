@@ -208,7 +208,9 @@ class Localizer:
         """How old a measurement stamped ``t`` is against the filter's time: GNSS
         arrives ~0.1 s late, 3 deg of heading during an in-place turn at 0.6 rad/s,
         enough for the gate to reject a good measurement if it were fused as new."""
-        return 0.0 if self.t is None else min(max(0.0, self.t - t), self.cfg.max_gap_s)
+        if self.t is None or not self.cfg.lag_compensation:
+            return 0.0
+        return min(max(0.0, self.t - t), self.cfg.max_gap_s)
 
     # --- updates ---
     def _update(
@@ -283,6 +285,7 @@ class Localizer:
             return False
         h = np.zeros((2, 5))
         h[0, 3] = h[1, 4] = 1.0
+        still = still and self.cfg.zero_velocity_updates
         self._still = still
         if still:
             z, r = np.zeros(2), np.eye(2) * self.cfg.zero_velocity_sd**2

@@ -65,6 +65,11 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     # and reading still), its velocities are measured as zero to this 1-sigma (m/s,
     # rad/s) instead of integrating the encoders' noise into position and heading
     zero_velocity_sd: Pos = 1e-4
+    zero_velocity_updates: bool = True
+    # a GNSS measurement arrives ~0.1 s after its epoch: fuse it against the state
+    # of its epoch (the motion since taken back through the unicycle model), not as
+    # if it were new; false: as they arrive (robot_localization without smoothing)
+    lag_compensation: bool = True
     # no RTK receiver is better than a millimetre, nor a two-antenna compass than
     # 0.006 deg: a fix claiming 1e-30 m^2 would collapse the covariance to nothing
     # and the gate would reject the truth ever after

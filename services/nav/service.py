@@ -129,7 +129,8 @@ class NavService:
         t = m.stamp_ns / 1e9
         now = self.ctx.clock.now_ns() / 1e9
         with self._lock:
-            lever = self.tilt.lever(mount, now)
+            lx, ly, height = self.tilt.tilted(mount, now)
+            lever = (lx, ly)
             xy = np.array([float(x), float(y)])
             if self.loc.update_antenna(t, xy, cov3[:2, :2], lever, name=str(m.antenna)):
                 # only a fix the filter took counts: a refused one stamped far in
@@ -137,7 +138,6 @@ class NavService:
                 self._last_fix = max(self._last_fix, t)
             # without a tilt the antennas' heights above base_link are taken upright:
             # they sit symmetrically about it, so the errors cancel in the mean
-            height = self.tilt.height(mount, now)
             self.loc.update_height(t, float(z) - height, float(cov3[2, 2]))
 
     def _on_heading(self, m: GnssHeading) -> None:

@@ -137,20 +137,17 @@ class Tilt:
         self.calibrations = n + 1
         return True
 
-    def lever(self, lever: tuple[float, float, float], t: float) -> tuple[float, float]:
-        """The horizontal part (x, y in base_link's yaw frame) of a point ``lever`` in
-        base_link (m), on the robot as tilted now; untilted without a tilt."""
+    def tilted(self, lever: tuple[float, float, float], t: float) -> tuple[float, float, float]:
+        """A point ``lever`` in base_link (m) on the robot as tilted now, in the frame
+        of base_link's yaw alone: its x, y are the horizontal lever arm, its z the
+        height above base_link. Untilted without a tilt."""
         tilt = self.tilt(t)
         if tilt is None:
-            return lever[0], lever[1]
+            return lever
         p = rot_zyx(tilt[0], tilt[1], 0.0) @ np.asarray(lever, dtype=np.float64)
-        return float(p[0]), float(p[1])
+        return float(p[0]), float(p[1]), float(p[2])
 
-    def height(self, lever: tuple[float, float, float], t: float) -> float:
-        """How far above base_link the point ``lever`` stands on the robot as tilted
-        now (m)."""
-        tilt = self.tilt(t)
-        if tilt is None:
-            return lever[2]
-        p = rot_zyx(tilt[0], tilt[1], 0.0) @ np.asarray(lever, dtype=np.float64)
-        return float(p[2])
+    def lever(self, lever: tuple[float, float, float], t: float) -> tuple[float, float]:
+        """The horizontal lever arm of ``lever`` as tilted now (see :meth:`tilted`)."""
+        x, y, _ = self.tilted(lever, t)
+        return x, y

@@ -63,12 +63,15 @@ GOALS = {
 BY_CONSTRUCTION = "no target: near the fine positioning's own 3 mm tolerance by construction"
 
 
-def run_experiment(exp: str, rtf: float, out: Path) -> tuple[dict[str, Any] | None, str]:
+def run_experiment(
+    exp: str, rtf: float, out: Path, profile: str = "ours", seed: int | None = None
+) -> tuple[dict[str, Any] | None, str]:
     """The experiment's stats.json, or None and why it failed."""
     cmd = [sys.executable, "-m", "phenorover", "--log-level", "warning", "nav-test", exp]
-    r = subprocess.run(
-        [*cmd, "--rtf", str(rtf), "--out", str(out)], capture_output=True, text=True, cwd=REPO
-    )
+    cmd += ["--rtf", str(rtf), "--out", str(out), "--profile", profile]
+    if seed is not None:
+        cmd += ["--seed", str(seed)]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)
     stats = out / "stats.json"
     if r.returncode != 0 or not stats.exists():
         last = (r.stderr.strip() or r.stdout.strip() or "no output").splitlines()[-1]

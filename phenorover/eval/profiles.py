@@ -1,0 +1,51 @@
+"""Navigation profiles the evaluation runs the same world with, as configurations of
+our own services (no fork): ``ours``, the shipped defaults, and ``paper``, the
+method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
+
+- one EKF over wheel odometry and the GNSS compass with robot_localization's
+  defaults: measurements fused as they arrive (no lag compensation), no gate (its
+  rejection thresholds default to none), static process noise, no standing-still
+  (zero-velocity) updates, no correlation scaling of standing fixes;
+- no IMU: a planar filter, base_link where the antennas lean;
+- pure pursuit with a 1 m look-ahead to the end, no fine positioning.
+
+The registration's C2C refinement is the paper's already (30 cm correspondence
+radius, :mod:`services.register.refine`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+PROFILES: dict[str, dict[str, dict[str, Any]]] = {
+    "ours": {},
+    "paper": {
+        "nav": {
+            "tilt": {"enabled": False},
+            "ekf": {
+                "lag_compensation": False,
+                "gate": False,
+                "dynamic_process_noise": False,
+                "zero_velocity_updates": False,
+                "gnss_correlation_s": 0.0,
+            },
+            "follower": {"lookahead_m": 1.0, "final_lookahead_m": 1.0, "fine": False},
+        },
+    },
+}
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out.get(k, {}), v) if isinstance(v, dict) else v
+    return out
+
+
+def apply(manifest: dict[str, Any], profile: str) -> dict[str, Any]:
+    """``manifest`` (a parsed deploy manifest) with ``profile``'s service settings
+    over its own. Raises KeyError naming an unknown profile."""
+    if profile not in PROFILES:
+        raise KeyError(f"no navigation profile {profile!r} (have: {', '.join(PROFILES)})")
+    services = _merge(manifest.get("services", {}), PROFILES[profile])
+    return {**manifest, "services": services}

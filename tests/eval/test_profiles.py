@@ -1,0 +1,28 @@
+"""The navigation profiles are configurations our services accept."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import msgspec
+import pytest
+
+from phenorover.eval import profiles
+from services.nav.config import NavConfig
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> None:
+    with (REPO / "deploy" / "sim.toml").open("rb") as f:
+        shipped = tomllib.load(f)
+    m = profiles.apply(shipped, "paper")
+    nav = msgspec.convert(m["services"]["nav"], NavConfig)
+    assert not nav.tilt.enabled and not nav.follower.fine and not nav.ekf.gate
+    assert not nav.ekf.lag_compensation and not nav.ekf.zero_velocity_updates
+    # the manifest's own settings stay where the profile says nothing
+    assert m["services"]["sim"] == shipped["services"]["sim"]
+    assert profiles.apply(shipped, "ours") == shipped
+    with pytest.raises(KeyError, match="no navigation profile 'fast'"):
+        profiles.apply(shipped, "fast")
