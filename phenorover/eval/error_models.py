@@ -15,6 +15,7 @@ from services.gnss.config import GnssConfig
 from services.gnss.reach_sim_config import ReachSimConfig
 from services.gnss.rtk_model import STATES, RtkModelConfig, StateNoise
 from services.sim.config import SimConfig
+from services.sim.imu import ImuConfig
 from services.sim.lidar import LidarConfig
 from services.sim.render import FaroNoise
 from services.sim.robot import RobotConfig
@@ -92,6 +93,18 @@ def faro(noise: FaroNoise, inclinometer_sd_deg: float) -> dict[str, str]:
     }
 
 
+def imu(cfg: ImuConfig) -> dict[str, str]:
+    if not cfg.enabled:
+        return {"IMU": "none"}
+    return {
+        "IMU (UM7 class)": (
+            f"tilt bias {cfg.tilt_bias_sd_deg:g} deg per axis per run, noise "
+            f"{cfg.tilt_noise_sd_deg:g} deg, {cfg.accel_leak:g} of a/g read as tilt, "
+            f"{cfg.rate_hz:g} Hz"
+        )
+    }
+
+
 def lidar(cfg: LidarConfig) -> dict[str, str]:
     return {
         "2D lidar": (
@@ -115,6 +128,7 @@ def simulation(
         **drive(w.robot, w.soil),
         **terrain(w.terrain),
         **faro(w.scanner_noise, sim.inclinometer_sd_deg),
+        **imu(sim.imu),
         **lidar(w.lidar),
         "seeds": f"sim noise {sim.seed}, world (terrain, plants) {w.seed}, receivers "
         f"{(receivers or gnss).seed}",
