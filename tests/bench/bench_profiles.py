@@ -105,7 +105,8 @@ def main() -> int:
                 goal = Goal(
                     "<=",
                     1.0,
-                    "calibrate the IMU without a scan (this experiment takes none): a reversal in place, or lanes driven both ways",
+                    "calibrate the IMU without a scan (this experiment takes none): "
+                    "a reversal in place, or lanes driven both ways",
                 )
             bench.figure(
                 f"{name} [{profile}]",
