@@ -114,13 +114,13 @@ def twist(v: float, w: float) -> Twist:
 
 
 def yaw_of(q: Quaternion) -> float:
-    """Yaw (rad, about z) of a unit quaternion."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    """Yaw (rad, about z) of a quaternion."""
+    return euler_of(q)[2]
 
 
 def quaternion_of_yaw(yaw: float) -> Quaternion:
     """The unit quaternion of a rotation by ``yaw`` rad about z."""
-    return Quaternion(0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+    return quaternion_of_euler(0.0, 0.0, yaw)
 
 
 def quaternion_of_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
