@@ -137,8 +137,9 @@ def test_a_route_not_renewed_stops_the_robot(
     assert max(abs(t.v) for t in truth) > 0.2, "the robot never drove"
     assert truth.wait_for(lambda t: t.stamp_ns > failed.stamp_ns and abs(t.v) < STILL, timeout=20)
     still = first_still_after(truth, failed.stamp_ns)
-    # braking from 0.5 m/s at 1 m/s^2 through a 0.15 s lag: about 0.6 s
-    assert still is not None and (still.stamp_ns - failed.stamp_ns) / 1e9 <= 1.0
+    # braking from 0.5 m/s at 1 m/s^2 through a 0.15 s lag: about 0.6 s; at 4x real time
+    # each 10 ms of scheduling on a loaded runner counts 40 ms, hence the room
+    assert still is not None and (still.stamp_ns - failed.stamp_ns) / 1e9 <= 1.5
 
 
 def test_navigation_killed_while_driving_the_base_stops_the_wheels(
