@@ -32,9 +32,16 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     watchdog_s: Pos = 0.25
     commander: str = "nav"
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0
-    # encoder noise the odometry reports as variance per unit travelled/turned
+    # the odometry's stated variances: ``var_v`` (m/s)^2; for the turn rate the
+    # encoders' noise ``var_w`` (rad/s)^2 plus the skid-steer's scrub, which grows with
+    # the rate: ``turn_slip_sd`` of it, 1 sigma (the body yaws at 0.93 of the
+    # wheel-implied rate on firm soil and less on loose, unknown to the encoders). A
+    # constant variance sized for 0.6 rad/s turns would call a 0.005 rad/s heading
+    # trim 60 times noisier than it is, and the moving GNSS compass would then pull
+    # the settled heading by its own error (0.6 deg per fix) during every trim.
     var_v: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
-    var_w: Annotated[float, msgspec.Meta(ge=0)] = 4e-3
+    var_w: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
+    turn_slip_sd: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.1
     ros2_cmd_vel: Topic = "cmd_vel"
     ros2_odom: Topic = "odom"
     ros2_scan: Topic = "scan"

@@ -87,7 +87,7 @@ class BaseService:
                 v=v,
                 w=w,
                 var_v=self.cfg.var_v,
-                var_w=self.cfg.var_w,
+                var_w=self.cfg.var_w + (self.cfg.turn_slip_sd * w) ** 2,
             )
         )
 
