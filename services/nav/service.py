@@ -70,6 +70,7 @@ class NavService:
         bus.report("ekf_resets", lambda: c.resets)
         bus.report("imu_calibrations", lambda: self.tilt.calibrations)
         bus.report("imu_rejected", lambda: self.tilt.rejected)
+        bus.report("imu_turn_levellings", lambda: self.tilt.turns.spots)
 
     def _on_odom(self, m: Odometry) -> None:
         t = m.stamp_ns / 1e9
@@ -89,7 +90,19 @@ class NavService:
         # the future must not keep a tilt fresh for ever
         t = self.ctx.clock.now_ns() / 1e9
         with self._lock:
-            self.tilt.imu(t, m.roll, m.pitch)
+            x = self.loc.x
+            pose = (float(x[0]), float(x[1]), float(x[2])) if self.loc.localized() else None
+            spots = self.tilt.turns.spots
+            self.tilt.imu(t, m.roll, m.pitch, pose)
+            if self.tilt.turns.spots > spots and not self.tilt.calibrations:
+                b = self.tilt.bias
+                self.ctx.log.info(
+                    "IMU tilt levelled by a turn in place: bias roll %.3f, pitch %.3f deg "
+                    "(%d turns)",
+                    math.degrees(b[0]),
+                    math.degrees(b[1]),
+                    spots + 1,
+                )
 
     def _on_scanner(self, m: ScannerStatus) -> None:
         """At the end of a scan the robot stood still through, the compensator's tilt

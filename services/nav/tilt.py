@@ -14,10 +14,13 @@ Only samples taken while the odometry says the body hardly accelerates
 ground changes over metres, so the last good tilt stands for the bad stretches.
 
 A bias of the unit's (turn-on bias, mounting) tilts every correction the same way.
-The scanner's dual-axis compensator measures the tilt at every scan far better
+Two things measure it. Every turn in place on one spot does, a level's reversal
+(:mod:`services.nav.turn_level`): the ground's slope turns with the robot, the bias
+does not. Better, the scanner's dual-axis compensator measures the tilt at every scan
 (FARO: 0.015 deg) within its working range: at the end of a scan taken while the
 robot stood still, the difference between the IMU's tilt and the compensator's is
-the IMU's bias, averaged over the scans so far and taken off from then on.
+the IMU's bias, averaged over the scans so far and, once there is one, preferred to
+the turns'.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import numpy as np
 
 from common.geo import euler_zyx, rot_zyx
 from common.robot import ImuMount
+from services.nav.turn_level import TurnLevel, TurnLevelConfig
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
@@ -45,7 +49,8 @@ class TiltConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ``calibrate``: take the IMU's bias off with the scanner's compensator, read where
     the compensator is valid (``compensator_range_deg``, FARO: +-2 deg).
     ``max_tilt_deg``: a sample beyond it is refused as absurd (a Husky tilted 20 deg
-    is not surveying; the UM7 says so only when broken or lied for)."""
+    is not surveying; the UM7 says so only when broken or lied for). ``turns``: the
+    bias from turns in place, until a scan's compensator reading gives a better one."""
 
     enabled: bool = True
     tau_s: Pos = 0.5
@@ -55,6 +60,7 @@ class TiltConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     calibrate: bool = True
     compensator_range_deg: Pos = 2.0
     max_tilt_deg: Pos = 20.0
+    turns: TurnLevelConfig = msgspec.field(default_factory=TurnLevelConfig)
 
 
 def tilt_of(r: np.ndarray) -> tuple[float, float]:
@@ -74,9 +80,18 @@ class Tilt:
         self._w = 0.0
         self.raw: tuple[float, float] | None = None  # low-passed IMU tilt of base_link
         self._t = -math.inf  # time of the last fused sample
-        self.bias = (0.0, 0.0)
-        self.calibrations = 0
+        self._compensated = (0.0, 0.0)  # the bias by the compensator, mean over scans
+        self.calibrations = 0  # scans that calibrated it
+        self.turns = TurnLevel(cfg.turns)
         self.rejected = 0  # samples refused as taken under acceleration
+
+    @property
+    def bias(self) -> tuple[float, float]:
+        """The IMU's (roll, pitch) bias (rad) taken off its readings: the
+        compensator's, else the turns', else none known."""
+        if self.calibrations:
+            return self._compensated
+        return self.turns.bias or (0.0, 0.0)
 
     def motion(self, t: float, v: float, w: float) -> None:
         """One odometry reading (s, m/s, rad/s)."""
@@ -95,15 +110,25 @@ class Tilt:
         a_long = abs(v1 - v0) / max(t1 - t0, 1e-3)
         return a_long <= self.cfg.max_accel and abs(v1 * self._w) <= self.cfg.max_accel
 
-    def imu(self, t: float, roll: float, pitch: float) -> bool:
+    def imu(
+        self,
+        t: float,
+        roll: float,
+        pitch: float,
+        pose: tuple[float, float, float] | None = None,
+    ) -> bool:
         """One IMU sample at ``t`` (s, on the caller's clock, never earlier than the
-        last): the unit's own roll and pitch (rad). Returns whether it was fused."""
+        last): the unit's own roll and pitch (rad), and the robot's estimated ``pose``
+        (x, y, yaw in the field frame; for the turns' calibration). Returns whether it
+        was fused."""
         lim = math.radians(self.cfg.max_tilt_deg)
         if not (abs(roll) <= lim and abs(pitch) <= lim) or t < self._t or not self.quiet():
             self.rejected += 1
             return False
         # base_link's tilt: the unit's attitude turned back by its mounting
         b = tilt_of(rot_zyx(roll, pitch, 0.0) @ self._mount_t)
+        if pose is not None and self._odom:
+            self.turns.sample(*pose, self._odom[-1][1], *b)
         if self.raw is None or t - self._t > self.cfg.max_age_s:
             self.raw = b
         else:
@@ -133,7 +158,8 @@ class Tilt:
             return False
         n = self.calibrations
         b = (self.raw[0] - roll, self.raw[1] - pitch)
-        self.bias = ((self.bias[0] * n + b[0]) / (n + 1), (self.bias[1] * n + b[1]) / (n + 1))
+        c = self._compensated
+        self._compensated = ((c[0] * n + b[0]) / (n + 1), (c[1] * n + b[1]) / (n + 1))
         self.calibrations = n + 1
         return True
 
