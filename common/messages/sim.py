@@ -52,7 +52,9 @@ class SimAntennas(Message, frozen=True, kw_only=True):
     simulator's config, see ``services/sim/faults.py``), per antenna 1 and 2:
     ``outage*``: the receiver sends nothing; ``force_float*``: it reports RTK float
     with float noise; ``offset*``: (east, north) metres added to what it reports,
-    its fix quality unchanged (multipath). The positions stay the truth."""
+    its fix quality unchanged (multipath). The positions stay the truth.
+    ``blocked1``, ``blocked2``: the share of each antenna's sky (above a 15 deg mask)
+    the crop hides, the world's, not a fault (:mod:`services.sim.sky`)."""
 
     p1: tuple[Coordinate, Coordinate, Coordinate]
     p2: tuple[Coordinate, Coordinate, Coordinate]
@@ -62,6 +64,8 @@ class SimAntennas(Message, frozen=True, kw_only=True):
     force_float2: bool = False
     offset1: tuple[Finite, Finite] = (0.0, 0.0)
     offset2: tuple[Finite, Finite] = (0.0, 0.0)
+    blocked1: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
+    blocked2: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
 
 
 class SimWheelCommand(Message, frozen=True, kw_only=True):

@@ -79,7 +79,7 @@ class ReachM2:
             dt_s = max(1e-3, (msg.stamp_ns - self._last[0]) / NS)
             vel = ((e - self._last[1]) / dt_s, (n - self._last[2]) / dt_s)
         self._last = (msg.stamp_ns, e, n)
-        sample = self._model.step(dt_s)
+        sample = self._model.step(dt_s, blocked=msg.blocked1 if one else msg.blocked2)
         floating = self._float.step(dt_s)
         if msg.outage1 if one else msg.outage2:
             return ""

@@ -60,6 +60,21 @@ class StateNoise(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     correlation_time_s: Positive = 2.0
 
 
+class CanopyConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """RTK under a crop: a receiver whose sky is ``blocked`` (0-1, the share of the
+    sky above its elevation mask the plots hide; the simulator computes it, see
+    :mod:`services.sim.sky`) tracks fewer satellites, through leaves and with
+    reflections off them. Its fixed solution's error grows by ``noise_gain x
+    blocked`` (1-sigma and GST alike) and it loses the fix ``float_gain x blocked``
+    times more often. The mechanism is the paper's geometry (antennas at 1.1 m among
+    1.9 m plants); both gains are assumptions, calibrated so that the paper's own
+    navigation reproduces its field cross-track errors in our simulator (see
+    docs/simulation.md)."""
+
+    noise_gain: NonNegative = 0.0
+    float_gain: NonNegative = 0.0
+
+
 def _rates(dwell_s: tuple[float, ...], exits: tuple[tuple[float, ...], ...]) -> list[list[float]]:
     """Rate matrix from mean dwell times and exit probabilities (rows sum to 1)."""
     return [[p / d for p in row] for d, row in zip(dwell_s, exits, strict=True)]
@@ -94,6 +109,7 @@ class RtkModelConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     rates_per_s: list[list[NonNegative]] = msgspec.field(default_factory=lambda: _DEFAULT_RATES)
     initial_state: FixQuality = FixQuality.FIX
     baseline_m: NonNegative = 400.0
+    canopy: CanopyConfig = msgspec.field(default_factory=CanopyConfig)
 
     def __post_init__(self) -> None:
         n = len(STATES)
@@ -140,18 +156,22 @@ class RtkErrorModel:
         # FLOAT -> FIX jump shrinks the error at once, as a real fix does.
         self._z = rng.standard_normal(3)
 
-    def step(self, dt_s: float, baseline_m: float | None = None) -> RtkSample:
+    def step(self, dt_s: float, baseline_m: float | None = None, blocked: float = 0.0) -> RtkSample:
         """Advance by ``dt_s`` seconds (> 0) and return the new epoch. ``baseline_m``
-        (distance to the base station) defaults to the configured one."""
+        (distance to the base station) defaults to the configured one; ``blocked``:
+        the share of the sky the crop hides (:class:`CanopyConfig`)."""
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s}")
-        self._transition(dt_s)
+        blocked = min(max(blocked, 0.0), 1.0) if math.isfinite(blocked) else 0.0
+        self._transition(dt_s, 1.0 + self.cfg.canopy.float_gain * blocked)
         noise = self.cfg.noise(self.state)
         if noise is None:
             return RtkSample(state=self.state, error_enu_m=None, sigma_enu_m=None)
         a = math.exp(-dt_s / noise.correlation_time_s)
         self._z = a * self._z + math.sqrt(1.0 - a * a) * self._rng.standard_normal(3)
         sig = sigma_enu(noise, self.cfg.baseline_m if baseline_m is None else baseline_m)
+        if self.state == FixQuality.FIX:
+            sig = sig * (1.0 + self.cfg.canopy.noise_gain * blocked)
         err = sig * self._z
         return RtkSample(
             state=self.state,
@@ -159,9 +179,11 @@ class RtkErrorModel:
             sigma_enu_m=(float(sig[0]), float(sig[1]), float(sig[2])),
         )
 
-    def _transition(self, dt_s: float) -> None:
+    def _transition(self, dt_s: float, fix_exit: float = 1.0) -> None:
         # At most one jump per step: exact enough when dt is far below the dwell times.
         row = self._rates[STATES.index(self.state)]
+        if self.state == FixQuality.FIX:
+            row = row * fix_exit  # under the crop the fix is lost more often
         total = float(row.sum())
         if total <= 0.0 or self._rng.random() >= -math.expm1(-total * dt_s):
             return

@@ -195,6 +195,7 @@ class SimService:
             self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id="base_link", v=ev, w=ew))
         if self._every(self.cfg.gnss_hz, k):
             a = self.world.gnss_truth(s).astype(float)
+            blocked = self.world.sky_blocked(a)
             self.ant_pub.put(
                 SimAntennas(
                     stamp_ns=t,
@@ -207,6 +208,8 @@ class SimService:
                     force_float2=fx.force_float[1],
                     offset1=fx.offset[0],
                     offset2=fx.offset[1],
+                    blocked1=blocked[0],
+                    blocked2=blocked[1],
                 )
             )
         if self.cfg.imu.enabled and self._every(self.cfg.imu.rate_hz, k):

@@ -24,6 +24,7 @@ from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
 from services.sim.render import FaroNoise, Scan, ScanSettings, render
 from services.sim.robot import RobotConfig, RobotState
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
+from services.sim.sky import SkyMask
 from services.sim.targets import (
     Survey,
     TargetConfig,
@@ -125,6 +126,11 @@ class World:
         self.lidar_scene = Scene(
             self.terrain, None, spheres, cyls, np.vstack([plot_boxes, ob_boxes])
         )
+        # the GNSS antennas' sky: each plot's canopy top stands on the ground at its centre
+        canopy = field.plot_boxes.copy()
+        centre = canopy[:, [0, 1]] / 2 + canopy[:, [3, 4]] / 2
+        canopy[:, 5] += self.terrain.height(centre[:, 0], centre[:, 1])
+        self.sky = SkyMask(canopy)
 
     def _place_targets(self, ob_cyls: F64, ob_boxes: F64) -> Targets:
         """The spheres: the manifest's sites, else chosen for its ``scan_sites``, else the
@@ -200,6 +206,11 @@ class World:
     def gnss_truth(self, state: RobotState) -> F64:
         """True field-frame positions (2, 3) of the two GNSS antenna phase centres."""
         return robot_mod.body_to_field(state, np.array([a.xyz for a in self.robot.antennas]))
+
+    def sky_blocked(self, antennas: F64) -> tuple[float, float]:
+        """The share of each antenna's sky (``antennas``: (2, 3), field frame) the crop
+        hides (:mod:`services.sim.sky`)."""
+        return self.sky.blocked(antennas[0]), self.sky.blocked(antennas[1])
 
     def scanner_pose(self, state: RobotState) -> F64:
         """4x4 field <- scanner of the FARO on the robot at ``state`` (its zero azimuth

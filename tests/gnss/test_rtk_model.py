@@ -80,3 +80,30 @@ def test_config_round_trips_and_rejects_bad_input() -> None:
         msgspec.json.decode(b'{"fixx": {}}', type=RtkModelConfig)
     with pytest.raises(ValueError, match="dt_s"):
         RtkErrorModel(RtkModelConfig(), np.random.default_rng(0)).step(0.0)
+
+
+def test_under_the_crop_the_fix_is_noisier_and_lost_more_often() -> None:
+    from services.gnss.rtk_model import CanopyConfig
+
+    canopy = CanopyConfig(noise_gain=2.0, float_gain=10.0)
+    cfg = RtkModelConfig(rates_per_s=ALWAYS_FIX, baseline_m=0.0, canopy=canopy)
+    model = RtkErrorModel(cfg, np.random.default_rng(2))
+    half = [model.step(0.1, blocked=0.5) for _ in range(60_000)]
+    errs = np.array([s.error_enu_m for s in half])
+    # half the sky hidden: 1 + 2 x 0.5 = twice the open-sky sigma, stated as such
+    np.testing.assert_allclose(errs.std(axis=0), [0.014, 0.014, 0.028], rtol=0.08)
+    assert half[-1].sigma_enu_m == pytest.approx((0.014, 0.014, 0.028))
+    # the fix is left 1 + 10 x blocked times as often: the time in FIX falls with it
+    lossy = RtkModelConfig(canopy=canopy)
+    for blocked in (0.0, 0.5):
+        model = RtkErrorModel(lossy, np.random.default_rng(3))
+        states = [model.step(0.5, blocked=blocked).state for _ in range(60_000)]
+        fix = sum(s == FixQuality.FIX for s in states) / len(states)
+        q = np.array(lossy.rates_per_s, dtype=float)
+        q[0] *= 1.0 + 10.0 * blocked
+        expect = stationary_distribution(
+            msgspec.structs.replace(lossy, rates_per_s=q.tolist())
+        )[FixQuality.FIX]
+        assert fix == pytest.approx(expect, abs=0.03), blocked
+    # absurd values are taken as the open sky or a closed one, never a crash
+    assert RtkErrorModel(cfg, np.random.default_rng(0)).step(0.1, blocked=float("nan")).state
