@@ -101,9 +101,9 @@ def test_under_the_crop_the_fix_is_noisier_and_lost_more_often() -> None:
         fix = sum(s == FixQuality.FIX for s in states) / len(states)
         q = np.array(lossy.rates_per_s, dtype=float)
         q[0] *= 1.0 + 10.0 * blocked
-        expect = stationary_distribution(
-            msgspec.structs.replace(lossy, rates_per_s=q.tolist())
-        )[FixQuality.FIX]
+        expect = stationary_distribution(msgspec.structs.replace(lossy, rates_per_s=q.tolist()))[
+            FixQuality.FIX
+        ]
         assert fix == pytest.approx(expect, abs=0.03), blocked
     # absurd values are taken as the open sky or a closed one, never a crash
     assert RtkErrorModel(cfg, np.random.default_rng(0)).step(0.1, blocked=float("nan")).state
