@@ -63,12 +63,23 @@ class CylinderObstacle(
 Obstacle = BoxObstacle | CylinderObstacle
 
 
+class SoilZone(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """A rectangle of the field frame (m) where the ground has traction factor
+    ``soil`` instead of the world's (the paper's southern paths: loose rocks)."""
+
+    x_min: float
+    y_min: float
+    x_max: float
+    y_max: float
+    soil: Annotated[float, msgspec.Meta(ge=0, le=10)]
+
+
 class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Everything that shapes the world. ``seed`` seeds terrain, plants and target
     heights (sensor noise takes the caller's generator). ``soil``: traction factor of
-    the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky (the paper's
-    southern paths). Where the robot's sensors sit is the robot description's, not
-    the world's (:class:`World`)."""
+    the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky; ``soil_zones``:
+    rectangles with a soil of their own (the paper's southern paths). Where the
+    robot's sensors sit is the robot description's, not the world's (:class:`World`)."""
 
     seed: int = 0
     terrain: TerrainConfig = TerrainConfig()
@@ -76,6 +87,7 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     targets: TargetConfig = TargetConfig()
     obstacles: list[Obstacle] = []
     soil: Annotated[float, msgspec.Meta(ge=0, le=10)] = 1.0
+    soil_zones: list[SoilZone] = []
     robot: RobotConfig = RobotConfig()
     scanner_noise: FaroNoise = FaroNoise()
     lidar: lidar_mod.LidarConfig = lidar_mod.LidarConfig()
@@ -195,9 +207,17 @@ class World:
         self, state: RobotState, cmd_v: float, cmd_w: float, dt: float, rng: np.random.Generator
     ) -> RobotState:
         """Advance the robot under a commanded twist (see :func:`robot.step`)."""
+        soil = self.soil_at(state.x, state.y)
         return robot_mod.step(
-            state, cmd_v, cmd_w, dt, self.terrain, rng, self.cfg.robot, self.cfg.soil, self.robot
+            state, cmd_v, cmd_w, dt, self.terrain, rng, self.cfg.robot, soil, self.robot
         )
+
+    def soil_at(self, x: float, y: float) -> float:
+        """The traction factor under (x, y): the last zone holding it, else the world's."""
+        for z in reversed(self.cfg.soil_zones):
+            if z.x_min <= x <= z.x_max and z.y_min <= y <= z.y_max:
+                return z.soil
+        return self.cfg.soil
 
     def encoder_twist(self, state: RobotState, rng: np.random.Generator) -> tuple[float, float]:
         """Wheel-odometry (v, w) of ``state`` (blind to slip, noisy)."""

@@ -73,3 +73,23 @@ def test_gnss_truth_and_scanner_pose(spl_world):
     assert np.linalg.norm(ant[0] - ant[1]) == pytest.approx(0.95)
     pose = w.scanner_pose(s)
     assert pose[2, 3] == pytest.approx(s.z + 1.0, abs=0.01)
+
+
+def test_a_soil_zone_slips_the_robot_where_it_lies_only(spl):
+    zone = b"[[soil_zones]]\nx_min = 0.0\ny_min = 0.0\nx_max = 5.0\ny_max = 3.0\nsoil = 3.0\n"
+    world = World(*spl, msgspec.toml.decode(zone, type=WorldConfig))
+    assert world.soil_at(2.0, 1.0) == 3.0 and world.soil_at(6.0, 1.0) == 1.0
+
+    def turned(x: float) -> float:
+        """Body yaw after 2 s of turning in place at 0.5 rad/s, starting at (x, 1)."""
+        s = world.settle(RobotState(x=x, y=1.0, yaw=0.0))
+        rng = np.random.default_rng(0)
+        for _ in range(100):
+            s = world.step_robot(s, 0.0, 0.5, 0.02, rng)
+        return s.yaw
+
+    # loose ground scrubs three times the turn away (0.93 of the wheels' rate on
+    # firm soil, 0.79 on the zone's)
+    assert turned(2.0) < turned(6.0) - 0.1
+    with pytest.raises(msgspec.ValidationError, match="soil"):
+        msgspec.toml.decode(zone.replace(b"3.0\n", b"-1.0\n"), type=WorldConfig)
