@@ -20,6 +20,7 @@ from services.sim.lidar import LidarConfig
 from services.sim.render import FaroNoise
 from services.sim.robot import RobotConfig
 from services.sim.terrain import TerrainConfig
+from services.sim.world import SoilZone
 
 
 def _noise(n: StateNoise) -> str:
@@ -41,6 +42,10 @@ def rtk(cfg: RtkModelConfig) -> dict[str, str]:
             f"Gauss-Markov {cfg.float_.correlation_time_s:g} s / "
             f"{cfg.single.correlation_time_s:g} s"
         ),
+        "RTK under the crop": (
+            f"fix error x (1 + {cfg.canopy.noise_gain:g} x the share of the sky the plots "
+            f"hide), fix lost x (1 + {cfg.canopy.float_gain:g} x that share)"
+        ),
         "fix state chain": "mean dwell "
         + ", ".join(f"{names[s]} {d:.3g} s" for s, d in zip(STATES, dwell, strict=True))
         + f", starting in {names[cfg.initial_state]}",
@@ -56,9 +61,15 @@ def compass(c: Compass) -> dict[str, str]:
     }
 
 
-def drive(robot: RobotConfig, soil: float) -> dict[str, str]:
-    """Wheel slip and encoders (every slip term scales with ``soil``)."""
+def drive(robot: RobotConfig, soil: float, zones: list[SoilZone] | None = None) -> dict[str, str]:
+    """Wheel slip and encoders (every slip term scales with ``soil``; ``zones`` have
+    their own)."""
+    where = "; ".join(
+        f"soil {z.soil:g} over x {z.x_min:g}..{z.x_max:g}, y {z.y_min:g}..{z.y_max:g} m"
+        for z in zones or []
+    )
     return {
+        **({"soil zones": where} if where else {}),
         "wheel slip": (
             f"{robot.slip_long * soil:.1%} forward slip; in-place turns reach "
             f"{robot.yaw_efficiency:.0%} of the wheel-implied rate, +-{robot.yaw_noise * soil:.0%}"
@@ -125,7 +136,7 @@ def simulation(
     return {
         **(rtk(receivers.rtk) if receivers is not None else {}),
         **compass(Compass.of(robot, gnss.compass)),
-        **drive(w.robot, w.soil),
+        **drive(w.robot, w.soil, w.soil_zones),
         **terrain(w.terrain),
         **faro(w.scanner_noise, sim.inclinometer_sd_deg),
         **imu(sim.imu),

@@ -108,7 +108,7 @@ def _follow(bus: Bus, rec: Recorder, legs: list[Leg], route_id: str, timeout: fl
         if (
             p is not None
             and p.route_id == route_id
-            and p.state in (NavState.ARRIVED, NavState.BLOCKED)
+            and p.state in (NavState.ARRIVED, NavState.BLOCKED, NavState.FAILED)
         ):
             return p.state
         time.sleep(0.2)

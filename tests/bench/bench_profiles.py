@@ -88,7 +88,9 @@ def main() -> int:
                     print(f"{exp} {profile} seed {seed}: {why or json.dumps(stats)}", flush=True)
                     if why:
                         bench.fail(f"{exp} {profile} seed {seed}", why)
-                    elif stats is not None:
+                    # a route that ended off its goal (the baseline has no fine
+                    # positioning) was still driven: its track errors count
+                    if stats is not None:
                         runs[profile].setdefault(exp, []).append(stats)
                     bench.error_models = models(out)
     means: dict[tuple[str, str], float] = {}
