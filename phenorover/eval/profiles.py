@@ -7,7 +7,8 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
   rejection thresholds default to none), static process noise, no standing-still
   (zero-velocity) updates, no correlation scaling of standing fixes;
 - no IMU: a planar filter, base_link where the antennas lean;
-- pure pursuit with a 1 m look-ahead to the end, no fine positioning.
+- pure pursuit with a 1 m look-ahead to the end, driving off a corner once within
+  its 2 deg heading tolerance, no fine positioning.
 
 The registration's C2C refinement is the paper's already (30 cm correspondence
 radius, :mod:`services.register.refine`).
@@ -29,7 +30,12 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "zero_velocity_updates": False,
                 "gnss_correlation_s": 0.0,
             },
-            "follower": {"lookahead_m": 1.0, "final_lookahead_m": 1.0, "fine": False},
+            "follower": {
+                "lookahead_m": 1.0,
+                "final_lookahead_m": 1.0,
+                "align_tolerance_deg": 2.0,
+                "fine": False,
+            },
         },
     },
 }
