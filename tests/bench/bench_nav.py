@@ -151,7 +151,10 @@ def record(bench: Bench, exp: str, s: dict[str, Any] | None, why: str) -> None:
         "estimate against the truth, horizontal (mean over the hold)",
         None if ex is None or ey is None else math.hypot(ex, ey),
         "cm",
-        note="what the tilt correction gets wrong: the uncalibrated IMU's bias at the antennas",
+        note=(
+            "what the tilt correction leaves (the IMU's bias as the turns on the way "
+            "levelled it) and the crop's fix noise averaged over the hold"
+        ),
     )
     fig("estimate against the truth, vertical", get("estimate_error_cm", "z"), "cm")
     fig("estimate's position residual SD, x", get("estimate", "residual_x_sd_cm"), "cm")
