@@ -50,9 +50,9 @@ GOALS = {
     "heading": Goal(
         "<=",
         0.1,
-        "re-trim the heading during the hold, or settle longer before the "
-        "first trim: the filter, averaging the compass, finds the heading further round "
-        "over the following minutes",
+        "trim only what the estimate knows: under the crop the compass reads 2 deg per "
+        "fix and 20 s of standing leave the heading about a degree uncertain, so the trims "
+        "chase noise; settle until the filter's heading sigma is below the tolerance",
     ),
 }
 BY_CONSTRUCTION = "no target: near the fine positioning's own 3 mm tolerance by construction"
