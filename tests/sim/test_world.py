@@ -77,7 +77,8 @@ def test_gnss_truth_and_scanner_pose(spl_world):
 
 def test_a_soil_zone_slips_the_robot_where_it_lies_only(spl):
     zone = b"[[soil_zones]]\nx_min = 0.0\ny_min = 0.0\nx_max = 5.0\ny_max = 3.0\nsoil = 3.0\n"
-    world = World(*spl, msgspec.toml.decode(zone, type=WorldConfig))
+    layout, field = spl
+    world = World(layout, field, msgspec.toml.decode(zone, type=WorldConfig))
     assert world.soil_at(2.0, 1.0) == 3.0 and world.soil_at(6.0, 1.0) == 1.0
 
     def turned(x: float) -> float:
