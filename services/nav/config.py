@@ -9,6 +9,7 @@ from common.config import ConfigError
 from common.robot import Robot
 from services.nav.ekf import EkfConfig
 from services.nav.follower import FollowerConfig
+from services.nav.gyro import GyroConfig
 from services.nav.tilt import TiltConfig
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
@@ -31,12 +32,14 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     taken to stand (the drivetrain's lag is 0.15 s), provided its odometry reads
     still too (within 4 sigma of the encoders' noise); the filter then makes
     zero-velocity updates. ``tilt``: base_link's roll and pitch from the IMU, which
-    put the antennas' lever arms in 3D (:mod:`services.nav.tilt`).
+    put the antennas' lever arms in 3D (:mod:`services.nav.tilt`). ``gyro``: the
+    IMU's yaw rate fused beside the wheels' (:mod:`services.nav.gyro`).
     """
 
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 20.0
     ekf: EkfConfig = msgspec.field(default_factory=EkfConfig)
     tilt: TiltConfig = msgspec.field(default_factory=TiltConfig)
+    gyro: GyroConfig = msgspec.field(default_factory=GyroConfig)
     follower: FollowerConfig = msgspec.field(default_factory=FollowerConfig)
     fuse_fix_types: list[str] = msgspec.field(default_factory=lambda: ["FIX"])
     obstacle_distance_m: Pos = 0.6

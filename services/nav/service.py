@@ -32,6 +32,7 @@ from common.status import parse_token
 from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import Localizer
 from services.nav.follower import Follower
+from services.nav.gyro import Gyro
 from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
 from services.nav.tilt import Tilt, tilt_of
 
@@ -45,6 +46,12 @@ class NavService:
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
         self.tilt = Tilt(cfg.tilt, ctx.robot.imu)
+        self.gyro = Gyro(cfg.gyro)
+        m = ctx.robot.imu
+        # the unit's rates turned into base_link by its mounting
+        self._imu_to_base = rot_zyx(m.roll_rad, m.pitch_rad, m.yaw_rad)
+        self._still = False  # the last odometry was taken standing
+        self._odom_at = 0.0  # when the last odometry arrived (s)
         self._scan: tuple[int, float] | None = None  # (scan id, when its scan was seen)
         self._lock = threading.Lock()
         self._obstacle = False
@@ -71,6 +78,7 @@ class NavService:
         bus.report("imu_calibrations", lambda: self.tilt.calibrations)
         bus.report("imu_rejected", lambda: self.tilt.rejected)
         bus.report("imu_turn_levellings", lambda: self.tilt.turns.spots)
+        bus.report("gyro_refused", lambda: self.gyro.refused)
 
     def _on_odom(self, m: Odometry) -> None:
         t = m.stamp_ns / 1e9
@@ -82,7 +90,12 @@ class NavService:
                 and m.v * m.v <= 16.0 * max(m.var_v, 1e-12)
                 and m.w * m.w <= 16.0 * max(m.var_w, 1e-12)
             )
-            self.loc.update_odometry(t, m.v, m.w, m.var_v, m.var_w, still=still)
+            self._still = still
+            # the gyro's rate, while it has one, rather than the scrubbing wheels'
+            now = self.ctx.clock.now_ns() / 1e9
+            w, var_w = self.gyro.odometry_rate(now, m.w, m.var_w, now - self._odom_at)
+            self._odom_at = now
+            self.loc.update_odometry(t, m.v, w, m.var_v, var_w, still=still)
             self.tilt.motion(t, m.v, m.w)
 
     def _on_imu(self, m: Imu) -> None:
@@ -94,6 +107,8 @@ class NavService:
             pose = (float(x[0]), float(x[1]), float(x[2])) if self.loc.localized() else None
             spots = self.tilt.turns.spots
             self.tilt.imu(t, m.roll, m.pitch, pose)
+            wz = float((self._imu_to_base @ np.array([m.wx, m.wy, m.wz]))[2])
+            self.gyro.sample(t, wz, self._still)
             if self.tilt.turns.spots > spots and not self.tilt.calibrations:
                 b = self.tilt.bias
                 self.ctx.log.info(
