@@ -6,9 +6,11 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
   defaults: measurements fused as they arrive (no lag compensation), no gate (its
   rejection thresholds default to none), static process noise, no standing-still
   (zero-velocity) updates, no correlation scaling of standing fixes;
-- no IMU: a planar filter, base_link where the antennas lean;
-- pure pursuit with a 1 m look-ahead to the end, driving off a corner once within
-  its 2 deg heading tolerance, no fine positioning.
+- no IMU: a planar filter, base_link where the antennas lean, the yaw rate from
+  the wheels alone;
+- pure pursuit with a 1 m look-ahead to the end, at 0.5 m/s (the paper states no
+  speed: our assumption, which the calibration was made with), driving off a
+  corner once within its 2 deg heading tolerance, no fine positioning.
 
 The registration's C2C refinement is the paper's already (30 cm correspondence
 radius, :mod:`services.register.refine`).
@@ -23,6 +25,7 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
     "paper": {
         "nav": {
             "tilt": {"enabled": False},
+            "gyro": {"enabled": False},
             "ekf": {
                 "lag_compensation": False,
                 "gate": False,
@@ -35,6 +38,8 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "final_lookahead_m": 1.0,
                 "align_tolerance_deg": 2.0,
                 "fine": False,
+                # the paper states no driving speed; the calibration assumed 0.5 m/s
+                "max_speed": 0.5,
             },
         },
     },

@@ -110,6 +110,20 @@ def test_fine_positioning_at_the_goal_with_a_lagging_drivetrain() -> None:
     assert abs(math.degrees(wrap_angle(yaw - goal_yaw))) <= cfg.fine_heading_tolerance_deg
 
 
+def test_the_place_along_the_leg_is_fine_tuned_before_turning_to_another_heading() -> None:
+    """Stopped 1 cm short of a goal whose planned heading is 90 deg off the leg's:
+    once turned, creeping along the new heading could not reach it, so the place
+    comes first."""
+    cfg = FollowerConfig()
+    f = Follower(cfg)
+    goal_yaw = math.radians(-90)
+    f.start("short", [Leg(x0=0, y0=0, x1=2, y1=0, final_yaw=goal_yaw)])
+    x, y, yaw, events = run_lagging(f, 1.985, 0.0, 0.0)
+    assert events == ["arrived"]
+    assert math.hypot(x - 2.0, y) <= cfg.fine_tolerance_m
+    assert abs(math.degrees(wrap_angle(yaw - goal_yaw))) <= cfg.fine_heading_tolerance_deg
+
+
 def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     """Stopped 1 cm beside the goal (a skid-steer robot cannot creep sideways), the
     robot backs up along the leg and comes in again, ending within the tolerances."""
