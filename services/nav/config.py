@@ -8,7 +8,7 @@ import msgspec
 from common.config import ConfigError
 from common.robot import Robot
 from services.nav.ekf import EkfConfig
-from services.nav.follower import FollowerConfig
+from services.nav.follower_config import FollowerConfig
 from services.nav.gyro import GyroConfig
 from services.nav.tilt import TiltConfig
 

@@ -3,11 +3,8 @@ corners (paper section 4.3), stops for obstacles and lost localization. Pure: th
 service feeds it poses and times and sends out the velocities it returns.
 
 The end of a route is a scan location, where the scanner's pose is what counts, so
-the last leg ends with a *fine* phase: the robot stands still for a moment (the
-filter averages GNSS while the wheels are still), then creeps along the leg to within
-``fine_tolerance_m`` of the goal and turns slowly to within ``fine_heading_tolerance_deg``
-of the planned heading, re-checking after each move. Creep speeds are low enough that
-the drivetrain's lag overshoots by well under the tolerances.
+the last leg ends with a *fine* phase (:mod:`services.nav.fine`); a sideways offset
+there makes the robot back up along the leg and come in again (``BACKUP``).
 """
 
 from __future__ import annotations
@@ -16,12 +13,11 @@ import dataclasses
 import enum
 import math
 from collections.abc import Callable
-from typing import Annotated
-
-import msgspec
 
 from common.geo import wrap_angle
 from common.messages.nav import LEASE_ENDED, Leg, NavState
+from services.nav.fine import Fine
+from services.nav.follower_config import FollowerConfig
 from services.nav.pursuit import (
     along_remaining,
     cross_track,
@@ -30,68 +26,7 @@ from services.nav.pursuit import (
     segment_distance,
 )
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
-
-
-class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Speeds within the Husky's limits. The paper's look-ahead was 1 m and it drove
-    off a corner once within its 2 deg heading tolerance; ``lookahead_m`` 0.6 and
-    ``align_tolerance_deg`` 0.5 close the corner turn's sideways shift and heading
-    error about twice as fast (pure pursuit settles a lateral offset over two to
-    three look-aheads of travel), while a centimetre of estimate noise still steers
-    by only a degree. Cruise at ``max_speed`` 0.3 m/s: the lateral slip the wheels
-    cannot see grows with the square root of the speed over each metre, and the crop's
-    correlated fix noise is averaged over more fixes per metre; on the calibrated
-    world 0.3 m/s leaves 6-13 % less cross-track error than 0.5, and a survey's
-    driving (minutes) is small beside its scans (minutes each)."""
-
-    lookahead_m: Pos = 0.6
-    # an in-place turn toward a leg ends within this of the leg's heading
-    align_tolerance_deg: Pos = 0.5
-    # on the route's last leg, toward the scan location: pure pursuit closes a
-    # lateral offset over about one look-ahead of travel, and the corner turn before
-    # it shifts the robot sideways by centimetres
-    final_lookahead_m: Pos = 0.5
-    max_speed: Pos = 0.3
-    max_accel: Pos = 0.5
-    max_turn_rate: Pos = 0.6
-    max_turn_accel: Pos = 1.5
-    rotate_gain: Pos = 1.5
-    min_turn_rate: Pos = 0.04
-    heading_tolerance_deg: Pos = 2.0
-    goal_tolerance_m: Pos = 0.02
-    min_speed: Pos = 0.03
-    obstacle_timeout_s: Pos = 30.0
-    # fine positioning at the route's end (the scan location)
-    fine: bool = True
-    fine_tolerance_m: Pos = 0.003
-    fine_heading_tolerance_deg: Pos = 0.1
-    # stand this long on arrival (the estimate averages the fixes down), and this
-    # long after a creep or trim, which odometry carries without disturbing it
-    fine_settle_s: Pos = 20.0
-    fine_resettle_s: Pos = 2.0
-    creep_speed: Pos = 0.01
-    creep_turn_rate: Pos = 0.005
-    # how long a creep command takes to show in the pose (drivetrain lag plus the
-    # estimate's): the creep stops this much early so it does not overshoot
-    creep_latency_s: Pos = 0.2
-    # at most this many creeps (re-approaches included) and as many heading trims
-    fine_moves: Annotated[int, msgspec.Meta(ge=0)] = 6
-    # a sideways offset cannot be crept away by a skid-steer robot: it backs up along
-    # the leg (at most the leg's length) and comes in again slowly, so that its pose
-    # estimate, settled while standing, is carried by odometry rather than pulled by
-    # each moving fix
-    reapproach_m: Pos = 0.8
-    reapproach_speed: Pos = 0.05
-    reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
-    reapproach_tolerance_m: Pos = 0.004
-    # arrival is declared only within this distance of the route's end (and within
-    # ``heading_tolerance_deg`` of its planned heading); else the route fails: a scan
-    # must never be taken where the robot merely stopped
-    arrival_tolerance_m: Pos = 0.05
-    # a route sent with ``join`` starts on the first leg passing this close to the
-    # robot (lanes are 1.8 m apart or more, so a neighbouring lane never qualifies)
-    join_distance_m: Pos = 0.5
+__all__ = ["Command", "Follower", "FollowerConfig", "Phase"]
 
 
 class Phase(enum.Enum):
@@ -132,13 +67,7 @@ class Follower:
         self._t: float | None = None
         self._blocked_since: float | None = None
         self.speed_limit = cfg.max_speed
-        self._still_since = 0.0
-        self._moves = 0
-        self._creep: tuple[str, float] | None = None  # ("v" | "w", sign) while creeping
-        self._reapproaches = 0
-        self._settle = cfg.fine_settle_s  # how long to stand before the next check
-        self._turns = 0
-        self._placed = False  # fine positioning: the place is done, the heading follows
+        self.fine = Fine(cfg)
         self._backup_to = 0.0  # distance behind the goal a back-up ends at (m)
         self.lease_until = math.inf
         self._join = False
@@ -162,8 +91,7 @@ class Follower:
         self.end_detail = ""
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
-        self._moves, self._turns, self._creep, self._reapproaches = 0, 0, None, 0
-        self._placed = False
+        self.fine = Fine(self.cfg)
         self.speed_limit = min(self.cfg.max_speed, max_speed or self.cfg.max_speed)
         self._blocked_since = None
 
@@ -289,10 +217,11 @@ class Follower:
                 v = self._ramp(v, self._v, self.cfg.max_accel, dt)
                 w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, v * k))
                 # coming in again after backing up is part of the fine positioning
-                return out(v, w, NavState.POSITIONING if self._reapproaches else NavState.DRIVING)
+                coming_in = self.fine.reapproaches > 0
+                return out(v, w, NavState.POSITIONING if coming_in else NavState.DRIVING)
             last = self.leg + 1 == len(self.legs)
             self.phase = Phase.FINE if last and self.cfg.fine else Phase.FINAL
-            self._still_since, self._settle = t, self.cfg.fine_settle_s
+            self.fine.begin(t)
         if self.phase == Phase.FINE:
             # the planned heading; a scan at the start point (zero-length leg, no
             # final_yaw) has none, and the robot scans as it stands. The position
@@ -301,40 +230,34 @@ class Follower:
             # planned heading it could no longer correct its place along the leg
             along = _leg_len(leg) > 0
             final = leg.final_yaw if leg.final_yaw is not None else heading if along else yaw
-            goal_yaw = final if self._placed or not along else heading
+            goal_yaw = final if self.fine.placed or not along else heading
             ferr = wrap_angle(yaw - goal_yaw)
-            if abs(ferr) > tol and self._creep is None:
+            fine = self.fine
+            if abs(ferr) > tol and not fine.creeping:
                 # a large turn (the leg's heading to another planned one) is done
                 # coarsely first; the fine phase then settles and trims it
-                self._still_since = t
+                fine.hold(t)
                 return out(0.0, self._rotate(-ferr, dt), NavState.ROTATING)
             if (
                 along
-                and self._creep is None
-                and t - self._still_since >= self._settle
                 and abs(xte) > self.cfg.reapproach_tolerance_m
                 and abs(herr) <= tol
-                and self._reapproaches < self.cfg.reapproaches
-                and self._moves < self.cfg.fine_moves
+                and fine.reapproach(t)
             ):
-                self._reapproaches += 1
-                self._moves += 1
                 self.phase = Phase.BACKUP
                 self._backup_to = min(self.cfg.reapproach_m, _leg_len(leg))
                 self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
                 return out(0.0, 0.0, NavState.POSITIONING)
             # the robot can only creep along its heading: the goal's offset that way
             ahead = (leg.x1 - x) * math.cos(yaw) + (leg.y1 - y) * math.sin(yaw)
-            placed = self._placed
-            v, w = self._fine(t, ahead, ferr)
-            if self._placed != placed:
+            placed = fine.placed
+            v, w = fine.step(t, ahead, ferr)
+            if fine.placed != placed:
                 return out(0.0, 0.0, NavState.POSITIONING)  # the heading's turn next
-            if v or w or t - self._still_since < self._settle:
+            if v or w or not fine.settled(t):
                 return out(v, w, NavState.POSITIONING)
             c = self._arrive(out, x, y, ferr)
-            c.detail += (
-                f" ({self._moves} creeps, {self._turns} turns, {self._reapproaches} re-approaches)"
-            )
+            c.detail += f" ({fine.summary()})"
             return c
         # FINAL: rotate in place to the next leg's heading
         if leg.final_yaw is not None:
@@ -359,36 +282,3 @@ class Follower:
         ):
             return out(0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
         return out(0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")
-
-    def _fine(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
-        """One step of fine positioning at the goal, ``rem`` metres short of it along
-        the robot's heading and ``yaw_err`` off the planned heading: (v, w) to creep
-        with, or (0, 0) to stand (settling, or done)."""
-        c = self.cfg
-        if self._creep is not None:
-            kind, sign = self._creep
-            err = rem if kind == "v" else -yaw_err
-            rate = c.creep_speed if kind == "v" else c.creep_turn_rate
-            # aim at the goal itself, stopping early by what is still in the pipeline
-            if sign * err > rate * c.creep_latency_s:
-                return (sign * rate, 0.0) if kind == "v" else (0.0, sign * rate)
-            self._creep, self._still_since, self._settle = None, t, c.fine_resettle_s
-            return 0.0, 0.0
-        if t - self._still_since < self._settle:
-            return 0.0, 0.0
-        # position and heading each have their own budget of moves: a trim of the
-        # heading is cheap and must not go short because the position took long
-        if abs(rem) > c.fine_tolerance_m and self._moves < c.fine_moves:
-            self._creep = ("v", math.copysign(1.0, rem))
-            self._moves += 1
-        elif not self._placed:
-            self._placed = True  # the place is done: the heading's turn
-            return 0.0, 0.0
-        elif (
-            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self._turns < c.fine_moves
-        ):
-            self._creep = ("w", math.copysign(1.0, -yaw_err))
-            self._turns += 1
-        else:
-            return 0.0, 0.0
-        return self._fine(t, rem, yaw_err)

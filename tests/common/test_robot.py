@@ -30,7 +30,7 @@ from services.gnss.compass import BaselineMismatch, Compass, compass_heading
 from services.gnss.config import GnssConfig
 from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import EkfConfig, Localizer
-from services.nav.follower import FollowerConfig
+from services.nav.follower_config import FollowerConfig
 from services.nav.service import build as build_nav
 from services.register.runlog import Placement, nav_pose
 from services.sim.config import SimConfig
@@ -163,11 +163,11 @@ def test_a_manifest_still_setting_a_moved_key_is_told_where_it_went(
 
 
 def test_nav_refuses_a_follower_faster_than_the_robot(tmp_path: Path) -> None:
-    slow = _moved(tmp_path, "max_speed = 1.0\n", "max_speed = 0.3\n")
+    slow = _moved(tmp_path, "max_speed = 1.0\n", "max_speed = 0.2\n")
     check_limits(NavConfig(), default_robot())
-    with pytest.raises(ConfigError, match=r"follower\] max_speed = 0.5 .* max_speed = 0.3"):
+    with pytest.raises(ConfigError, match=r"follower\] max_speed = 0.3 .* max_speed = 0.2"):
         check_limits(NavConfig(), slow)
-    check_limits(NavConfig(follower=FollowerConfig(max_speed=0.3)), slow)
+    check_limits(NavConfig(follower=FollowerConfig(max_speed=0.2)), slow)
 
 
 # --- one change, every consumer follows ---

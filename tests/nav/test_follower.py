@@ -134,7 +134,7 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     assert events == ["arrived"]
     assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
     assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
-    assert f._reapproaches >= 1
+    assert f.fine.reapproaches >= 1
 
 
 def test_no_fine_positioning_when_disabled() -> None:

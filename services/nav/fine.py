@@ -1,0 +1,99 @@
+"""Fine positioning at a scan location, the route's end (pure; times in seconds).
+
+The robot stands ``fine_settle_s`` (the filter averages GNSS while the wheels are
+still), then creeps along its heading to within ``fine_tolerance_m`` of the goal and
+turns slowly to within ``fine_heading_tolerance_deg`` of the planned heading,
+re-checking ``fine_resettle_s`` after each move. Creep speeds are low enough that the
+drivetrain's lag overshoots by well under the tolerances. The place comes first: a
+skid-steer robot creeps only along its heading, so once turned to another planned
+heading it could no longer correct its place along the leg. A sideways offset, which
+no creep removes, is the follower's to drive out by backing up (:meth:`Fine.reapproach`
+says whether the budget allows one).
+"""
+
+from __future__ import annotations
+
+import math
+
+from services.nav.follower_config import FollowerConfig
+
+
+class Fine:
+    """The fine phase's budget of moves and its timers, for one route."""
+
+    def __init__(self, cfg: FollowerConfig) -> None:
+        self.cfg = cfg
+        self.moves = 0  # creeps along the heading, re-approaches included
+        self.turns = 0  # heading trims
+        self.reapproaches = 0
+        self.placed = False  # the place is done: the heading follows
+        self._creep: tuple[str, float] | None = None  # ("v" | "w", sign) while creeping
+        self._still_since = 0.0
+        self._settle = cfg.fine_settle_s  # how long to stand before the next check
+
+    def begin(self, t: float) -> None:
+        """The robot stopped at the goal (first, or after coming in again): stand
+        ``fine_settle_s`` before the first check."""
+        self._still_since, self._settle = t, self.cfg.fine_settle_s
+
+    def hold(self, t: float) -> None:
+        """The robot is turning coarsely: the settle starts again once it stops."""
+        self._still_since = t
+
+    @property
+    def creeping(self) -> bool:
+        return self._creep is not None
+
+    def settled(self, t: float) -> bool:
+        return t - self._still_since >= self._settle
+
+    def reapproach(self, t: float) -> bool:
+        """Whether to back up and come in again now (settled, not creeping, budget
+        left); counts it when so."""
+        c = self.cfg
+        ok = (
+            self._creep is None
+            and self.settled(t)
+            and self.reapproaches < c.reapproaches
+            and self.moves < c.fine_moves
+        )
+        if ok:
+            self.reapproaches += 1
+            self.moves += 1
+        return ok
+
+    def summary(self) -> str:
+        return f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches"
+
+    def step(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
+        """One step at the goal, ``rem`` metres short of it along the robot's heading
+        and ``yaw_err`` off the heading sought: (v, w) to creep with, or (0, 0) to
+        stand (settling, or done)."""
+        c = self.cfg
+        if self._creep is not None:
+            kind, sign = self._creep
+            err = rem if kind == "v" else -yaw_err
+            rate = c.creep_speed if kind == "v" else c.creep_turn_rate
+            # aim at the goal itself, stopping early by what is still in the pipeline
+            if sign * err > rate * c.creep_latency_s:
+                return (sign * rate, 0.0) if kind == "v" else (0.0, sign * rate)
+            self._creep, self._still_since, self._settle = None, t, c.fine_resettle_s
+            return 0.0, 0.0
+        if not self.settled(t):
+            return 0.0, 0.0
+        # position and heading each have their own budget of moves: a trim of the
+        # heading is cheap and must not go short because the position took long
+        if abs(rem) > c.fine_tolerance_m and self.moves < c.fine_moves:
+            self._creep = ("v", math.copysign(1.0, rem))
+            self.moves += 1
+        elif not self.placed:
+            self.placed = True
+            return 0.0, 0.0
+        elif (
+            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < c.fine_moves
+        ):
+            self._creep = ("w", math.copysign(1.0, -yaw_err))
+            self.turns += 1
+        else:
+            return 0.0, 0.0
+        return self.step(t, rem, yaw_err)
