@@ -16,7 +16,10 @@ pre-alignment's largest mismatch, 27.3 cm; nav + C2C, 2.07 cm mean point error;
 its cloud against the target-based one, 1.25 cm mean and 0.82 cm SD), and ours
 against the baseline's (nav + C2C at most half of it).
 
-    python tests/bench/bench_survey.py [--json OUT] [--only sim hil paper]
+    python tests/bench/bench_survey.py [--json OUT] [--only sim hil paper] [--keep]
+
+``--keep`` carries the figures of the surveys not run from the ``--json`` file (each
+keeps its own date and commit), so one survey can be run again alone.
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from phenorover.eval import profiles
 from phenorover.eval.error_models import from_manifest
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
 from phenorover.eval.register.truth import find_truth
-from phenorover.eval.results import Bench, Goal
+from phenorover.eval.results import Bench, Goal, ResultError, load
 
 REPO = Path(__file__).resolve().parents[2]
 # name -> (manifest, navigation profile)
@@ -96,7 +99,9 @@ def survey(manifest: Path) -> tuple[dict[str, Any], str]:
         "run_dir": str(REPO / run),
     }
     if r.returncode != 0:
-        return stats, f"phenorover sim exited {r.returncode}: {r.stderr.strip()[-300:]}"
+        said = [ln for ln in r.stdout.splitlines() if "not scanned" in ln or "failed" in ln]
+        last = (said or r.stderr.strip().splitlines() or ["no output"])[-1]
+        return stats, f"phenorover sim exited {r.returncode}: {last.strip()[:300]}"
     return stats, ""
 
 
@@ -153,6 +158,31 @@ def survey_manifest(manifest: Path, profile: str, tmp: Path) -> Path:
     return path
 
 
+def title(name: str, manifest: Path) -> str:
+    """How survey ``name``'s figures are named (their common beginning)."""
+    what = "make sim with the paper's method" if name == "paper" else f"make {name}"
+    return f"{what} ({manifest.name})"
+
+
+def carry(bench: Bench, path: Path, names: list[str]) -> dict[str, dict[str, Any]]:
+    """The figures and details of surveys ``names`` from an earlier results file,
+    each figure with its own date and commit (``--keep``); nothing when the file is
+    missing or unreadable."""
+    try:
+        old = load(path)
+    except ResultError as exc:
+        print(f"--keep: {exc}", flush=True)
+        return {}
+    out = {}
+    for name in names:
+        begins = title(name, SURVEYS[name][0])
+        figures = [f for f in old.figures if f.name.startswith(begins + ",")]
+        if figures and name in old.details:
+            bench.figures.extend(figures)
+            out[name] = old.details[name]
+    return out
+
+
 def measure(bench: Bench, name: str, manifest: Path, profile: str = "ours") -> dict[str, Any]:
     """One survey on ``manifest`` under navigation ``profile`` and its figures; what
     it measured, for the details."""
@@ -168,9 +198,7 @@ def measure(bench: Bench, name: str, manifest: Path, profile: str = "ours") -> d
     reg, reg_why = ({}, why) if why else registration(Path(stats["run_dir"]))
     if why:
         bench.fail(name, why)
-    how = "the paper's method" if profile == "paper" else "ours"
-    what = f"make sim with {how}" if name == "paper" else f"make {name}"
-    what += f" ({manifest.name}), field {field}"
+    what = f"{title(name, manifest)}, field {field}"
     baseline = profile == "paper"
 
     def fig(label: str, value: float | None, unit: str, **kw: Any) -> None:
@@ -260,6 +288,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--only", nargs="+", choices=sorted(SURVEYS), default=sorted(SURVEYS))
+    ap.add_argument(
+        "--keep",
+        action="store_true",
+        help="the surveys not run keep their figures from the --json file",
+    )
     args = ap.parse_args()
     bench = Bench("bench_survey")
     details = {
@@ -267,6 +300,8 @@ def main() -> int:
         for name, (manifest, profile) in SURVEYS.items()
         if name in args.only
     }
+    if args.keep and args.json is not None:
+        details |= carry(bench, args.json, [n for n in SURVEYS if n not in args.only])
     compare(bench, details)
     return bench.finish(args.json, details)
 

@@ -9,6 +9,7 @@ import msgspec
 import pytest
 
 from phenorover.eval import profiles
+from services.mission.config import MissionConfig
 from services.nav.config import NavConfig
 
 REPO = Path(__file__).resolve().parents[2]
@@ -21,6 +22,10 @@ def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> 
     nav = msgspec.convert(m["services"]["nav"], NavConfig)
     assert not nav.tilt.enabled and not nav.follower.fine and not nav.ekf.gate
     assert not nav.ekf.lag_compensation and not nav.ekf.zero_velocity_updates
+    assert not nav.gyro.enabled and nav.follower.max_speed == 0.5
+    # it scans where it stops, as the paper's robot did
+    mission = msgspec.convert(m["services"]["mission"], MissionConfig)
+    assert mission.arrival_tolerance_m == nav.follower.arrival_tolerance_m == 0.25
     # the manifest's own settings stay where the profile says nothing
     assert m["services"]["sim"] == shipped["services"]["sim"]
     assert profiles.apply(shipped, "ours") == shipped
