@@ -223,11 +223,9 @@ class Localizer:
         r: F64,
         direct: Sequence[int],
         residual: Callable[[F64, F64], F64] = _subtract,
-        gnss: bool = True,
     ) -> bool:
         """Gate and fuse one measurement; ``direct`` are the states it observes
-        directly, re-initialised from a consistent run of rejections; a ``gnss`` one
-        has its variance scaled for the fixes' correlation over time."""
+        directly, re-initialised from a consistent run of rejections."""
         x = self.x.reshape(-1, 1)
         h = jac(x.ravel())
         innov = residual(z, hx(x.ravel()))
@@ -240,7 +238,7 @@ class Localizer:
             d2 = math.nan
         if not math.isfinite(d2):
             return self._refuse("invalid", f"{kind}: innovation {innov} is not usable")
-        if gnss:
+        if kind != "odometry":
             r = r * self._correlation_scale(kind, t)
         run = self._runs.setdefault(kind, ConsistentRun())
         gate = CHI2_999[len(z)]
@@ -293,7 +291,7 @@ class Localizer:
             z, r = np.zeros(2), np.eye(2) * self.cfg.zero_velocity_sd**2
         else:
             z, r = np.array([v, w]), np.diag([max(var_v, 1e-6), max(var_w, 1e-6)])
-        return self._update(t, "odometry", z, lambda x: h @ x, lambda x: h, r, (3, 4), gnss=False)
+        return self._update(t, "odometry", z, lambda x: h @ x, lambda x: h, r, (3, 4))
 
     def update_antenna(
         self,

@@ -17,9 +17,9 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     three look-aheads of travel), while a centimetre of estimate noise still steers
     by only a degree. Cruise at ``max_speed`` 0.3 m/s: the lateral slip the wheels
     cannot see grows with the square root of the speed over each metre, and the crop's
-    correlated fix noise is averaged over more fixes per metre; on the calibrated
-    world 0.3 m/s leaves 6-13 % less cross-track error than 0.5, and a survey's
-    driving (minutes) is small beside its scans (minutes each)."""
+    correlated fix noise is averaged over more fixes per metre (bench_profiles
+    measures it); a survey's driving (minutes) is small beside its scans (minutes
+    each)."""
 
     lookahead_m: Pos = 0.6
     # an in-place turn toward a leg ends within this of the leg's heading

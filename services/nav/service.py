@@ -91,7 +91,7 @@ class NavService:
                 and m.w * m.w <= 16.0 * max(m.var_w, 1e-12)
             )
             self._still = still
-            # the gyro's rate, while it has one, rather than the scrubbing wheels'
+            # the wheels' yaw rate weighed against the gyro's while it has a fresh one
             now = self.ctx.clock.now_ns() / 1e9
             w, var_w = self.gyro.odometry_rate(now, m.w, m.var_w, now - self._odom_at)
             self._odom_at = now
