@@ -89,9 +89,9 @@ status_timeout_s = 40.0
 max_fix_age_s = 2.0
 [services.nav.follower]
 # fine positioning to millimetres is nav-test's subject; these surveys need the scan
-# within the arrival tolerance, and a shorter one saves minutes
+# within the arrival tolerance, and a shorter settle saves minutes (the re-approach
+# stays: a route resumed after a pause can end centimetres to the side)
 fine_settle_s = 5.0
-reapproaches = 0
 {follower}
 [services.planner]
 [services.mission]
