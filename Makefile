@@ -44,14 +44,14 @@ bench: $(STAMP)
 	$(BIN)/python -c "import open3d" 2>/dev/null || echo "open3d does not load (Debian: apt-get install libusb-1.0-0): Embree comparison skipped"
 	$(BIN)/python tests/bench/run_all.py
 
-# docs/results.md from the benchmarks' JSON (runs/bench/*.json, written by `make bench`):
+# docs/results.md from the benchmarks' JSON (docs/bench/*.json, written by `make bench`):
 # a table per benchmark with the error models beside it; a missing JSON is said to be.
 # Runs no benchmark.
 results: $(STAMP)
 	$(BIN)/python -m phenorover.eval.render_results
 
 # The fault campaign: each service killed and each injected fault during a survey of
-# the tiny field, judged by the simulator's truth; writes runs/bench/faults.json and
+# the tiny field, judged by the simulator's truth; writes docs/bench/faults.json and
 # the table in docs/faults.md. About half an hour on two cores.
 faults: $(STAMP)
 	$(BIN)/python tests/bench/fault_campaign.py

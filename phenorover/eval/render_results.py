@@ -1,13 +1,15 @@
-"""``make results``: docs/results.md from the benchmarks' JSON (runs/bench/*.json).
+"""``make results``: docs/results.md from the benchmarks' JSON (docs/bench/*.json).
 
 One table per benchmark (figure, value, target, verdict, error models, date, commit,
 machine), the error models in force printed under it, every missed target with its
 measured figure and what would close it, and every experiment that failed. A
-benchmark whose JSON is missing or of an older format is said to be, with no figures.
+benchmark whose JSON is of an older format is said to be, with no figures; one whose
+JSON is missing keeps its section of the page being replaced, marked as carried (or
+says it has no results).
 The fault campaign and the soak have generated pages of their own (docs/faults.md,
 docs/soak.md): linked, not copied. Runs no benchmark.
 
-    python -m phenorover.eval.render_results [--bench-dir runs/bench] [--out docs/results.md]
+    python -m phenorover.eval.render_results [--bench-dir docs/bench] [--out docs/results.md]
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from phenorover.eval.results import (
+    BENCH_DIR,
     BenchResult,
     Figure,
     ResultError,
@@ -81,9 +84,30 @@ def _models(res: BenchResult) -> dict[str, int]:
     return tags
 
 
-def benchmark_section(name: str, title: str, bench_dir: Path) -> list[str]:
-    out = [f"## {title} (`{name}`)", ""]
+def previous_section(page: str, heading: str) -> list[str] | None:
+    """The body of the section headed ``heading`` on an earlier rendering of the page
+    (None when it has none, or only its own "No results" line)."""
+    if heading not in page:
+        return None
+    body = page.split(heading, 1)[1].split("\n## ", 1)[0].strip("\n").splitlines()
+    body = [line for line in body if not line.startswith("Carried from the previous page")]
+    while body and not body[0].strip():
+        body.pop(0)
+    if not body or body[0].startswith("No results"):
+        return None
+    return body
+
+
+def benchmark_section(name: str, title: str, bench_dir: Path, previous: str = "") -> list[str]:
+    heading = f"## {title} (`{name}`)"
+    out = [heading, ""]
     path = bench_dir / f"{name}.json"
+    carried = None if path.exists() else previous_section(previous, heading)
+    if carried is not None:
+        # a benchmark not run where the page is rendered keeps its published figures
+        # (each row still names its own date and commit) rather than vanishing
+        note = f"Carried from the previous page: {path} is missing. `make bench` writes it."
+        return [*out, note, "", *carried, ""]
     try:
         res = load(path)
     except ResultError as exc:
@@ -146,8 +170,9 @@ def linked_section(bench_dir: Path, docs_dir: Path) -> list[str]:
     return [*out, ""]
 
 
-def render(bench_dir: Path, docs_dir: Path) -> str:
-    """The page, from the JSON under ``bench_dir``; links are relative to ``docs_dir``."""
+def render(bench_dir: Path, docs_dir: Path, previous: str = "") -> str:
+    """The page, from the JSON under ``bench_dir``; links are relative to ``docs_dir``.
+    A benchmark with no JSON keeps its section of ``previous`` (the page as it was)."""
     names = dict(BENCHMARKS)
     for p in sorted(bench_dir.glob("bench_*.json")):
         names.setdefault(p.stem, p.stem)
@@ -160,17 +185,18 @@ def render(bench_dir: Path, docs_dir: Path) -> str:
         "",
     ]
     for name, title in names.items():
-        out += benchmark_section(name, title, bench_dir)
+        out += benchmark_section(name, title, bench_dir, previous)
     out += linked_section(bench_dir, docs_dir)
     return "\n".join(out).rstrip() + "\n"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bench-dir", type=Path, default=Path("runs/bench"))
+    ap.add_argument("--bench-dir", type=Path, default=BENCH_DIR)
     ap.add_argument("--out", type=Path, default=Path("docs/results.md"))
     args = ap.parse_args(argv)
-    text = render(args.bench_dir, args.out.parent)
+    previous = args.out.read_text() if args.out.exists() else ""
+    text = render(args.bench_dir, args.out.parent, previous)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.out.with_name(args.out.name + ".tmp")
     tmp.write_text(text)

@@ -1,4 +1,4 @@
-"""Benchmark results: one schema for every benchmark's JSON (``runs/bench/<name>.json``)
+"""Benchmark results: one schema for every benchmark's JSON (``docs/bench/<name>.json``)
 and the writer they all use.
 
 A benchmark makes a :class:`Bench`, records every figure with :meth:`Bench.figure`
@@ -32,6 +32,9 @@ import msgspec
 
 SCHEMA = "phenorover.bench/1"
 REPO = Path(__file__).resolve().parents[1]
+#: Where the benchmarks' JSON lives: committed beside the pages rendered from it, so a
+#: page re-rendered after one benchmark keeps every other benchmark's figures
+BENCH_DIR = Path(__file__).resolve().parents[2] / "docs" / "bench"
 Verdict = Literal["met", "missed", "no target"]
 Op = Literal["<=", ">="]
 

@@ -1,7 +1,7 @@
 """The fault campaign (``make faults``): each fault and each service kill during a
 survey of the tiny test field, with every service its own process under
 ``phenorover up``, judged against the simulator's truth. Writes
-``runs/bench/faults.json`` and the table in ``docs/faults.md`` (fault, expectation,
+``docs/bench/faults.json`` and the table in ``docs/faults.md`` (fault, expectation,
 observed, verdict; date, commit, machine). About half an hour on two cores.
 
     python tests/bench/fault_campaign.py [--only NAME ...] [--json OUT] [--no-docs]
@@ -33,6 +33,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
+from phenorover.eval.results import BENCH_DIR  # noqa: E402
 from tests.bench.fault_cases import CASES as FAULTS  # noqa: E402
 from tests.bench.partition_case import CASE as PARTITION  # noqa: E402
 from tests.conftest import Procs  # noqa: E402
@@ -89,7 +90,7 @@ def write_docs(table: str) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--only", nargs="*", default=None, help="case names (prefixes)")
-    ap.add_argument("--json", type=Path, default=REPO / "runs" / "bench" / "faults.json")
+    ap.add_argument("--json", type=Path, default=BENCH_DIR / "faults.json")
     ap.add_argument("--no-docs", action="store_true")
     ap.add_argument("--keep", type=Path, default=None, help="keep each case's folder here")
     args = ap.parse_args()

@@ -1,5 +1,5 @@
 """``make bench``: run every tests/bench/bench_*.py in its own process, each writing
-its figures to runs/bench/<name>.json through phenorover.eval.results. Figures are
+its figures to docs/bench/<name>.json through phenorover.eval.results. Figures are
 reported, never asserted; a benchmark that fails (an experiment failed, or it died)
 makes this exit 1. A benchmark that died before writing its JSON gets one that says
 so, never the figures of an earlier run. `make results` renders docs/results.md."""
@@ -13,7 +13,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from phenorover.eval.results import Bench
+from phenorover.eval.results import BENCH_DIR, Bench
 
 HERE = Path(__file__).resolve().parent
 
@@ -31,7 +31,7 @@ def run(script: Path, out: Path) -> int:
 
 
 def main() -> int:
-    out = Path("runs/bench")
+    out = BENCH_DIR
     out.mkdir(parents=True, exist_ok=True)
     failed = []
     for script in sorted(HERE.glob("bench_*.py")):

@@ -185,6 +185,28 @@ def test_make_results_writes_the_page(tmp_path: Path) -> None:
     assert out.read_text().startswith("# Benchmark results")
 
 
+def test_a_benchmark_not_rerun_keeps_its_published_section(tmp_path: Path) -> None:
+    bench_dir = tmp_path / "bench"
+    bench_dir.mkdir()
+    synthetic(bench_dir)
+    out = tmp_path / "docs" / "results.md"
+    assert render_results.main(["--bench-dir", str(bench_dir), "--out", str(out)]) == 0
+    first = out.read_text()
+    nav = first.split("## Navigation")[1].split("\n## ")[0]
+    # bench_nav is not run where the page is rendered again: its table stays, marked
+    (bench_dir / "bench_nav.json").unlink()
+    for _ in range(2):  # and stays through a second rendering, marked once
+        assert render_results.main(["--bench-dir", str(bench_dir), "--out", str(out)]) == 0
+    again = out.read_text().split("## Navigation")[1].split("\n## ")[0]
+    assert again.count("Carried from the previous page") == 1
+    assert "bench_nav.json is missing" in again
+    assert "| stationary: true stop | **2.95 cm** | <= 0.5 cm | **missed** |" in again
+    assert nav.strip().splitlines()[1:] == again.strip().splitlines()[3:]
+    # a benchmark that never had figures still says it has none
+    reg = out.read_text().split("## Registration")[1].split("\n## ")[0]
+    assert "No results:" in reg and "Carried" not in reg
+
+
 def stationary_stats(true_cm: float, est_cm: float) -> dict[str, Any]:
     return {
         "experiment": "stationary",
