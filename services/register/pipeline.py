@@ -13,19 +13,23 @@ import logging
 import math
 import time
 from pathlib import Path
+from typing import Annotated
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
+from scipy.spatial import cKDTree
 
 from common.pointcloud import PosedScan, read_e57
 from common.poses import F64, check_pose
 from services.register.metrics import (
     CloudDistance,
+    OverlapStats,
     PointStats,
     TargetStats,
     cloud_distance,
     merged,
+    overlap_stats,
     point_stats,
     subsample,
     target_stats,
@@ -55,6 +59,8 @@ class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     targets: TargetConfig = TargetConfig()
     sample_points: int = 5000
     cloud_points: int = 20000
+    # the overlap residuals' search radius (m): the paper's C2C searched 30 cm
+    overlap_radius: Annotated[float, msgspec.Meta(gt=0, le=1.0)] = 0.3
     seed: int = 0
 
 
@@ -105,11 +111,13 @@ class PairReport(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class MethodReport(msgspec.Struct, frozen=True, kw_only=True):
-    """A registration scored against the target-based reference."""
+    """A registration scored against the target-based reference, and its overlap
+    residuals (SCENE's scan point statistics; need no reference)."""
 
     targets_vs_reference: TargetStats
     points_vs_reference: PointStats | None
     cloud_vs_reference: CloudDistance | None
+    overlap: OverlapStats | None = None
 
 
 class RegistrationReport(msgspec.Struct, frozen=True, kw_only=True):
@@ -209,6 +217,15 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     rmax = cfg.refine.max_range
     full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
     ref_cloud = merged(full, tsol.poses)
+    trees = [cKDTree(f) for f in full]
+    # every method's overlap residuals over the same pairs: those navigation put near
+    near = [
+        (i, j)
+        for i in range(len(nav))
+        for j in range(i + 1, len(nav))
+        if np.linalg.norm(nav[i][:3, 3] - nav[j][:3, 3]) <= cfg.refine.max_pair_distance
+    ]
+    cropped = [s[np.linalg.norm(s, axis=1) <= rmax] for s in samples]
 
     def score(poses: list[F64], is_reference: bool) -> MethodReport:
         pts, cloud = None, None
@@ -220,6 +237,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
             targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
             points_vs_reference=pts,
             cloud_vs_reference=cloud,
+            overlap=overlap_stats(trees, cropped, poses, near, cfg.overlap_radius),
         )
 
     nav_r, c2c_r, tgt_r = score(nav, False), score(c2c, False), score(tsol.poses, True)

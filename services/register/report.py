@@ -13,10 +13,11 @@ Tables:
 - stationary errors per scan location (paper Figures 21-22): distance from the
   planned point to the recorded mean position, heading error, the SD of the pose
   over the scan, the inclinometer's pitch and roll;
-- registration (the metrics of the paper's Table 1): target statistics and scan
-  point statistics of navigation-only, navigation + C2C and target-based
-  registration against the target-based reference; the Hausdorff-style distances of
-  each cloud to the target-based cloud (mean, SD, share below 2 and 3 cm, per axis).
+- registration (the metrics of the paper's Table 1): target statistics and point
+  errors of navigation-only, navigation + C2C and target-based registration against
+  the target-based reference; each one's scan point statistics as SCENE reports them
+  (overlap residuals, :func:`.metrics.overlap_stats`); the Hausdorff-style distances
+  of each cloud to the target-based cloud (mean, SD, share below 2 and 3 cm, per axis).
 
 The report holds our own figures only: the paper's figures beside them, and errors
 against a simulator's truth, are the evaluation's (``phenorover eval register``).
@@ -110,6 +111,18 @@ def _method_row(name: str, label: str, m: MethodReport) -> Json:
             "per_scan_mean_cm": [_cm(v) for v in p.per_scan_mean],
         }
     )
+    o = m.overlap
+    row["overlap"] = (
+        None
+        if o is None or o.count == 0
+        else {
+            "radius_cm": _cm(o.radius),
+            "pairs": len(o.pairs),
+            "count": o.count,
+            "max_cm": _cm(o.max),
+            "mean_cm": _cm(o.mean),
+        }
+    )
     row["hausdorff"] = (
         None
         if c is None
@@ -175,7 +188,8 @@ def _f(v: Any, digits: int = 2) -> str:
 
 def _method_lines(rows: list[Json]) -> list[str]:
     out = [
-        "| method | target mean | horizontal | vertical | max point error | mean point error |",
+        "| method | target mean | horizontal | vertical | max point distance "
+        "| mean point distance |",
         "|---|---|---|---|---|---|",
     ]
     for r in rows:
@@ -246,6 +260,18 @@ def markdown(report: Json, figures: list[str]) -> str:
             "Against the target-based reference (cm):",
             "",
             *_method_lines(reg["vs_reference"]),
+            "",
+            "Scan point statistics, as SCENE reports them (each scan's points against the "
+            "nearest point of every overlapping scan, within the search radius; no "
+            "reference needed):",
+            "",
+            "| method | overlapping pairs | max point error (cm) | mean point error (cm) |",
+            "|---|---|---|---|",
+            *[
+                f"| {r['label']} | {o['pairs']} | {_f(o['max_cm'])} | {_f(o['mean_cm'])} |"
+                for r in reg["vs_reference"]
+                if (o := r.get("overlap"))
+            ],
             "",
             "Cloud to the target-based cloud (Hausdorff-style nearest-neighbour distances):",
             "",

@@ -263,6 +263,7 @@ def test_the_registration_headline_is_the_point_error_against_truth() -> None:
         return {
             "points_vs_reference": {"count": 9, "mean": mean, "max": 0.1, "per_scan_mean": []},
             "targets_vs_reference": {"count": 3, "mean": 0.004},
+            "overlap": {"radius": 0.3, "count": 99, "mean": 0.021, "max": 0.03, "pairs": []},
         }
 
     def vs_truth(mean: float) -> dict[str, Any]:
@@ -282,8 +283,11 @@ def test_the_registration_headline_is_the_point_error_against_truth() -> None:
     assert head[0].name.endswith("mean point error against the truth")
     assert head[0].value == pytest.approx(1.89) and head[0].verdict == "missed"
     assert head[0].what_would_close_it
-    ref = next(f for f in b.figures if "target-based reference (the paper's metric)" in f.name)
-    assert ref.value == pytest.approx(1.20) and ref.verdict == "no target" and ref.paper == 2.07
+    ref = next(f for f in b.figures if "C2C: mean point error against the target-based" in f.name)
+    assert ref.value == pytest.approx(1.20) and ref.verdict == "no target" and ref.paper is None
+    # the paper's scan point statistics are set beside ours computed as SCENE does
+    scene = next(f for f in b.figures if f.name.startswith("nav + C2C: mean point error between"))
+    assert scene.value == pytest.approx(2.1) and scene.paper == 2.07
     assert not any("clouds alone" in f.name for f in b.figures)  # not in this registration
     tb = next(f for f in b.figures if f.name.startswith("target-based, all scans"))
     assert tb.value is None and tb.what_would_close_it == "not measured: not in the report"

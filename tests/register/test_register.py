@@ -16,7 +16,7 @@ from common.poses import (
     scanner_pose,
     tilt_from_axis_inclinations,
 )
-from services.register.metrics import cloud_distance, point_stats
+from services.register.metrics import cloud_distance, overlap_stats, point_stats
 from services.register.poses import perturb
 from services.register.refine import (
     RefineConfig,
@@ -196,6 +196,33 @@ def test_cloud_distance_of_a_shift():
     assert d.mean == pytest.approx(0.01, abs=1e-3)
     assert d.below_2cm == 1.0
     assert d.axis_mean[2] == pytest.approx(0.01, abs=1e-3)
+
+
+def test_overlap_residuals_need_no_reference_and_grow_with_a_pose_error():
+    rng = np.random.default_rng(3)
+    g = np.arange(-3.0, 3.0, 0.02)
+    xx, yy = np.meshgrid(g, g)
+    ground = np.column_stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)])
+    where = [(0.0, 0.0), (1.0, 0.0), (40.0, 0.0)]  # the third sees ground of its own
+    poses = [perturb(np.eye(4), np.array([x, y, 1.2]), np.zeros(3)) for x, y in where]
+    world = [ground + np.array([x, 0.0, 0.0]) if x > 10 else ground for x, _ in where]
+    full = [apply(inv(p), w) for p, w in zip(poses, world, strict=True)]
+    samples = []
+    for p, (x, _) in zip(poses, where, strict=True):
+        s = np.column_stack([rng.uniform(-3, 3, (2000, 2)), np.zeros(2000)])
+        samples.append(apply(inv(p), s + np.array([x if x > 10 else 0.0, 0.0, 0.0])))
+    trees = [cKDTree(f) for f in full]
+    pairs = [(0, 1), (0, 2), (1, 2)]
+
+    right = overlap_stats(trees, samples, poses, pairs, 0.3)
+    assert [(p.i, p.j) for p in right.pairs] == [(0, 1)]  # the far scan overlaps none
+    assert right.mean < 0.01 and right.max == right.pairs[0].mean
+    # scan 1 placed 3 cm too high: its points stand 3 cm off scan 0's ground
+    wrong = [poses[0], perturb(poses[1], np.array([0.0, 0.0, 0.03]), np.zeros(3)), poses[2]]
+    off = overlap_stats(trees, samples, wrong, pairs, 0.3)
+    assert off.mean == pytest.approx(0.031, abs=0.004)
+    # nothing within the radius: no pair, no figure
+    assert overlap_stats(trees, samples, wrong, pairs, 0.02).count == 0
 
 
 def _scans(rng):

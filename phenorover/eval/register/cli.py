@@ -168,7 +168,8 @@ def markdown(result: Json, truth: TruthScore | None) -> str:
         lines.append("The report has no registration.")
         return "\n".join(lines) + "\n"
     lines += [
-        "Against the target-based reference, ours / the paper's Table 1:",
+        "Ours / the paper's Table 1 (targets: against the target-based reference; "
+        "points: scan point statistics, the overlap residuals SCENE reports):",
         "",
         "| method | target mean | horizontal | vertical | max point error | mean point error |",
         "|---|---|---|---|---|---|",
