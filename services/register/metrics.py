@@ -9,12 +9,14 @@ the Hausdorff figure). All distances in metres, all frames ``field``.
   Against the true poses this is the error against ground truth.
 - Overlap residuals (what SCENE reports as a registration's "scan point statistics",
   and the paper's Table 1 quotes): for every pair of scans near enough to overlap,
-  each scan's points placed by the registration's poses against the nearest point of
-  the other scan, among those within a search radius; the mean over every such point
-  and the largest pair mean. It needs no reference, so the target-based
-  registration has one too (the paper's 1.37 cm): what is left when the poses are
-  right is the clouds' own disagreement (ranging noise, a canopy seen from two
-  sides), which is why it cannot be read as an error against the truth.
+  each scan's points placed by the registration's poses, and their point-to-plane
+  distance to the nearest point of the other scan (its downsampled cloud with
+  normals, the residual a cloud-to-cloud registration minimises), among those
+  within a search radius; the mean over every such point and the largest pair
+  mean. It needs no reference, so the target-based registration has one too (the
+  paper's 1.37 cm): what is left when the poses are right is the clouds' own
+  disagreement (ranging noise, a canopy seen from two sides), which is why it
+  cannot be read as an error against the truth.
 - Cloud-to-cloud (Hausdorff-style) distances from one cloud to the other: for every
   source point its nearest reference point; mean, SD, max (the Hausdorff distance),
   the shares below 2 and 3 cm, and the mean and SD of the per-axis components of
@@ -136,7 +138,7 @@ def point_stats(samples: list[F64], poses: list[F64], reference: list[F64]) -> P
 
 
 def overlap_stats(
-    trees: list[cKDTree],
+    clouds: list[tuple[F64, F64, cKDTree]],
     samples: list[F64],
     poses: list[F64],
     pairs: list[tuple[int, int]],
@@ -144,17 +146,21 @@ def overlap_stats(
     min_points: int = 50,
 ) -> OverlapStats:
     """Overlap residuals of ``poses`` (field <- scanner) over scan ``pairs``: each
-    scan's ``samples`` (scanner frame) placed into the other scan's frame and matched
-    in its k-d tree of full-resolution points (``trees``, scanner frame, built once
-    for every method). A pair overlaps when at least ``min_points`` points matched."""
+    scan's ``samples`` (scanner frame) placed into the other scan's frame, matched to
+    the nearest point of its downsampled cloud (``clouds``: points, unit normals and
+    their k-d tree, scanner frame, built once for every method) within ``radius``,
+    and measured along that point's normal. A pair overlaps when at least
+    ``min_points`` points matched."""
     per: list[PairOverlap] = []
     dists: list[npt.NDArray[np.float64]] = []
     for i, j in pairs:
         d = []
         for a, b in ((i, j), (j, i)):
+            points, normals, tree = clouds[a]
             pts = apply(inv(poses[a]) @ poses[b], samples[b])
-            da, _ = trees[a].query(pts, distance_upper_bound=radius)
-            d.append(da[np.isfinite(da)])
+            da, k = tree.query(pts, distance_upper_bound=radius)
+            m = np.isfinite(da)
+            d.append(np.abs(np.einsum("ij,ij->i", pts[m] - points[k[m]], normals[k[m]])))
         both = np.concatenate(d)
         if len(both) >= min_points:
             per.append(PairOverlap(i=i, j=j, count=len(both), mean=float(both.mean())))

@@ -217,7 +217,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     rmax = cfg.refine.max_range
     full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
     ref_cloud = merged(full, tsol.poses)
-    trees = [cKDTree(f) for f in full]
+    clouds = [(pr.points, pr.normals, cKDTree(pr.points)) for pr in prepared]
     # every method's overlap residuals over the same pairs: those navigation put near
     near = [
         (i, j)
@@ -237,7 +237,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
             targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
             points_vs_reference=pts,
             cloud_vs_reference=cloud,
-            overlap=overlap_stats(trees, cropped, poses, near, cfg.overlap_radius),
+            overlap=overlap_stats(clouds, cropped, poses, near, cfg.overlap_radius),
         )
 
     nav_r, c2c_r, tgt_r = score(nav, False), score(c2c, False), score(tsol.poses, True)

@@ -67,11 +67,16 @@ def test_register_writes_e57_laz_and_report(mission_dir: Path) -> None:
     assert rep["registration"]["scans"] == len(back)
     rows = {r["method"]: r for r in rep["registration"]["vs_reference"]}
     assert 0 <= rows["c2c"]["points"]["mean_cm"] < 10
+    # scan point statistics need no reference: the target-based registration has them
+    for method in ("navigation", "c2c", "target_based"):
+        o = rows[method]["overlap"]
+        assert o["radius_cm"] == 30.0 and o["pairs"] >= 1 and 0 < o["mean_cm"] <= o["max_cm"]
     # our own figures only: no truth, no paper's (both are the evaluation's)
     assert "vs_truth" not in rep["registration"] and "paper_cm" not in rep["registration"]
     assert (out / "register.toml").is_file() and rep["outputs"]["config"] == "register.toml"
     md = (out / "report.md").read_text()
     assert "Stationary errors per scan location" in md and "Nav. sensors + C2C" in md
+    assert "Scan point statistics, as SCENE reports them" in md
     assert "![registration_hist.png](registration_hist.png)" in md
 
 
