@@ -261,12 +261,21 @@ def measure(bench: Bench, name: str, manifest: Path, profile: str = "ours") -> d
     return {**stats, **reg, "true_stops_cm": stops, "failed": why}
 
 
-CALIBRATE = Goal(
-    "<=",
-    25.0,
+TILT = (
     "tilt beyond the scanner compensator's range (the paper blames its pre-alignment's "
-    "mismatches on pitch and roll): ruts, bumps and steeper spots in the simulated ground",
+    "mismatches on pitch and roll): ruts, bumps and steeper spots in the simulated ground"
 )
+# what would bring each calibration figure to the paper's
+CLOSE = {
+    "overlap_mean_c2c": "nav + C2C as far above the target-based registration as the "
+    "paper's (2.07 against 1.37 cm): plants that move between scans minutes apart (wind), "
+    "which the simulated plants do not",
+    "overlap_mean_target_based": "the clouds' own disagreement where every pose is right: "
+    "the simulated canopy's leaf size and porosity, and SCENE's matching (its subsampling "
+    "and outlier rejection are not published)",
+    "nav_max": TILT,
+    "hausdorff_mean": TILT,
+}
 
 
 def compare(bench: Bench, details: dict[str, dict[str, Any]]) -> None:
@@ -291,7 +300,7 @@ def compare(bench: Bench, details: dict[str, dict[str, Any]]) -> None:
                 f"{label}: the paper's method in our sim against the paper's field figure",
                 100.0 * abs(base[key] - paper) / paper,
                 "%",
-                goal=CALIBRATE,
+                goal=Goal("<=", 25.0, CLOSE[key]),
                 note=f"{base[key]:.3g} cm against {paper} cm",
             )
     if base.get("c2c") and ours.get("c2c") is not None:
