@@ -278,7 +278,7 @@ class Follower:
         off = math.hypot(leg.x1 - x, leg.y1 - y)
         what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"
         if off <= self.cfg.arrival_tolerance_m and abs(yaw_err) <= math.radians(
-            self.cfg.heading_tolerance_deg
+            self.cfg.arrival_heading_tolerance_deg
         ):
             return out(0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
         return out(0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")

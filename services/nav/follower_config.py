@@ -61,10 +61,12 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     reapproach_speed: Pos = 0.05
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
     reapproach_tolerance_m: Pos = 0.004
-    # arrival is declared only within this distance of the route's end (and within
-    # ``heading_tolerance_deg`` of its planned heading); else the route fails: a scan
-    # must never be taken where the robot merely stopped
+    # arrival is declared only within this distance of the route's end and this angle
+    # of its planned heading; else the route fails: a scan must never be taken where
+    # the robot merely stopped. The heading's is its own setting, not the in-place
+    # turn's ``heading_tolerance_deg``: a turn ended within 2 deg may coast past it
     arrival_tolerance_m: Pos = 0.05
+    arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     # a route sent with ``join`` starts on the first leg passing this close to the
     # robot (lanes are 1.8 m apart or more, so a neighbouring lane never qualifies)
     join_distance_m: Pos = 0.5

@@ -26,6 +26,8 @@ def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> 
     # it scans where it stops, as the paper's robot did
     mission = msgspec.convert(m["services"]["mission"], MissionConfig)
     assert mission.arrival_tolerance_m == nav.follower.arrival_tolerance_m == 0.25
+    assert nav.follower.arrival_heading_tolerance_deg == 180.0
+    assert nav.follower.heading_tolerance_deg == 2.0  # its corner turns keep the paper's
     # the manifest's own settings stay where the profile says nothing
     assert m["services"]["sim"] == shipped["services"]["sim"]
     assert profiles.apply(shipped, "ours") == shipped
