@@ -57,6 +57,13 @@ def fields(scratch: Path) -> dict[str, str]:
     return {"spl": "spl", "mini.geojson": str(mini), "strips.toml": str(strips)}
 
 
+def reason(text: str) -> str:
+    """Why a run failed: the command's own last complaint, else its last line."""
+    lines = text.strip().splitlines() or ["no output"]
+    said = [ln for ln in lines if ln.startswith("phenorover sim:")]
+    return (said or lines)[-1][:200]
+
+
 def run_once(field: str, log: Path) -> dict[str, object]:
     t0 = time.monotonic()
     with log.open("w") as out:
@@ -72,7 +79,7 @@ def run_once(field: str, log: Path) -> dict[str, object]:
     m = SUMMARY.search(text)
     done, total = (int(m[3]), int(m[4])) if m else (0, 0)
     ok = code == 0 and m is not None and done == total and m[5] == "0"
-    why = "" if ok else (text.strip().splitlines() or ["no output"])[-1][:200]
+    why = "" if ok else reason(text)
     wall = time.monotonic() - t0
     when = {"date": time.strftime("%Y-%m-%d"), "commit": commit()}
     return {"exit": code, "done": done, "total": total, "ok": ok, "wall_s": wall, "why": why} | when
