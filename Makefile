@@ -57,7 +57,8 @@ faults: $(STAMP)
 	$(BIN)/python tests/bench/fault_campaign.py
 
 # Ten whole `phenorover sim --field F` runs of SPL and of two fields of our own, in a
-# row; writes docs/soak.md. About an hour on two cores.
+# row; writes docs/bench/soak.json and docs/soak.md after every run. Three to four
+# hours on two cores: `python tests/bench/soak.py --resume` continues a stopped soak.
 soak: $(STAMP)
 	$(BIN)/python tests/bench/soak.py
 
