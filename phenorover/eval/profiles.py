@@ -12,9 +12,9 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
   speed: our assumption, which the calibration was made with), driving off a
   corner once within its 2 deg heading tolerance, no fine positioning;
 - a scan wherever the robot stopped (the paper has no arrival check; ours, 5 cm
-  and 2 deg, is widened to 25 cm and any heading: at 2 deg, half its arrivals failed
-  on a turn that had coasted 2.6-4.3 deg past the leg's heading, and a retry once
-  ended 42 cm off).
+  and 2 deg, is widened to 25 cm and any heading: at 2 deg, half its arrivals on
+  the ENGR survey failed 2.6-4.3 deg off, where pure pursuit had steered to close a
+  sideways offset, and a retry once ended 42 cm off).
 
 The registration's C2C refinement is the paper's already (30 cm correspondence
 radius, :mod:`services.register.refine`).

@@ -64,7 +64,8 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     # arrival is declared only within this distance of the route's end and this angle
     # of its planned heading; else the route fails: a scan must never be taken where
     # the robot merely stopped. The heading's is its own setting, not the in-place
-    # turn's ``heading_tolerance_deg``: a turn ended within 2 deg may coast past it
+    # turn's ``heading_tolerance_deg``: a last leg without a final turn ends at the
+    # angle pure pursuit steered to close a sideways offset
     arrival_tolerance_m: Pos = 0.05
     arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     # a route sent with ``join`` starts on the first leg passing this close to the

@@ -58,7 +58,7 @@ class PointStats(msgspec.Struct, frozen=True, kw_only=True):
 
 class PairOverlap(msgspec.Struct, frozen=True, kw_only=True, array_like=True):
     """Scans ``i`` and ``j``: how many points of each found a neighbour of the other
-    within the radius, and their mean distance (m)."""
+    within the radius, and their mean point-to-plane distance (m)."""
 
     i: int
     j: int

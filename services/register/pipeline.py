@@ -41,6 +41,7 @@ from services.register.refine import (
     prepare,
     prior_sigmas,
     refine,
+    select_pairs,
 )
 from services.register.spheres import SphereConfig, detect_spheres
 from services.register.targets import TargetConfig, match_targets, solve_targets
@@ -219,12 +220,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     ref_cloud = merged(full, tsol.poses)
     clouds = [(pr.points, pr.normals, cKDTree(pr.points)) for pr in prepared]
     # every method's overlap residuals over the same pairs: those navigation put near
-    near = [
-        (i, j)
-        for i in range(len(nav))
-        for j in range(i + 1, len(nav))
-        if np.linalg.norm(nav[i][:3, 3] - nav[j][:3, 3]) <= cfg.refine.max_pair_distance
-    ]
+    near = select_pairs(nav, cfg.refine.max_pair_distance)
     cropped = [s[np.linalg.norm(s, axis=1) <= rmax] for s in samples]
 
     def score(poses: list[F64], is_reference: bool) -> MethodReport:
