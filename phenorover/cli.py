@@ -129,7 +129,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         bus = Bus(session, "sim-cli")
         problems: list[str] = []
         try:
-            final = run_survey(bus, field, args.survey_timeout, problems)
+            final = run_survey(bus, field, args.survey_timeout, problems, args.new)
             if final is not None:
                 from services.mission.registration import wait_registration
 
@@ -195,6 +195,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--timeout", type=float, default=30.0)
     s.add_argument("--field", default=None, help="field to survey (default: the manifest's)")
     s.add_argument("--alive-only", action="store_true", help="only show the services alive")
+    s.add_argument(
+        "--new",
+        action="store_true",
+        help="abort a survey left unfinished in the run folder (its log and scans stay) "
+        "and start a new one; without it, the unfinished survey is resumed and followed",
+    )
     s.add_argument("--survey-timeout", type=float, default=900.0, metavar="S")
     s.add_argument("--register-timeout", type=float, default=600.0, metavar="S")
     s.set_defaults(func=cmd_sim)

@@ -51,6 +51,9 @@ class MissionPhase(enum.StrEnum):
     FAILED = "failed"
 
 
+# the phases a mission ends in
+FINAL_PHASES = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
+
 # MissionState.detail of a survey that is done while its scans are being registered
 # (a child process of the mission service); another detail once registration ends
 REGISTERING = "registering"
@@ -70,6 +73,11 @@ class MissionState(Message, frozen=True, kw_only=True):
     distance_m: NonNegative = 0.0
     detail: str = ""
     planned_m: NonNegative = 0.0
+
+    @property
+    def in_progress(self) -> bool:
+        """Whether this is of a mission still going (a resumed one included)."""
+        return bool(self.mission) and self.phase not in (*FINAL_PHASES, MissionPhase.IDLE)
 
 
 class MissionEvent(Message, frozen=True, kw_only=True):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from common import keys
 from common.messages.mission import (
+    FINAL_PHASES,
     MissionAbort,
     MissionCommand,
     MissionEvent,
@@ -21,8 +22,6 @@ from common.messages.mission import (
     MissionStatusQuery,
 )
 from common.transport import Bus, RpcError
-
-FINAL = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
 
 
 def add_mission_arguments(p: argparse.ArgumentParser) -> None:
@@ -78,12 +77,30 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
+def _call(bus: Bus, cmd: MissionCommand) -> MissionState:
+    """One mission command; a service that is alive but not serving yet (no reply)
+    is asked again for up to 30 s."""
+    deadline = time.monotonic() + 30
+    while True:
+        try:
+            return bus.call(keys.MISSION_CMD, cmd, timeout=330)
+        except RpcError as exc:
+            if "no reply" not in str(exc) or time.monotonic() > deadline:
+                raise
+
+
 def run_survey(
-    bus: Bus, field: str, timeout: float, problems: list[str] | None = None
+    bus: Bus,
+    field: str,
+    timeout: float,
+    problems: list[str] | None = None,
+    new: bool = False,
 ) -> MissionState | None:
     """Start a survey and print a line per step until it ends; the final state (None
-    when it could not start). ``problems`` gets the text of every error event of the
-    mission (a location skipped or failed, and why)."""
+    when it could not start). A mission the service resumed (the deployment was stopped
+    mid-survey) is followed to its end instead, or with ``new`` aborted first (its log
+    and scans stay). ``problems`` gets the text of every error event of the mission (a
+    location skipped or failed, and why)."""
     seen: list[MissionEvent] = []
 
     def on_event(e: MissionEvent) -> None:
@@ -92,16 +109,28 @@ def run_survey(
 
     bus.subscribe(keys.MISSION_EVENT, on_event)
     state = bus.latest(keys.MISSION_STATE)
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            s = bus.call(keys.MISSION_CMD, MissionStart(field=field), timeout=330)
-            break
-        except RpcError as exc:
-            if "no reply" not in str(exc) or time.monotonic() > deadline:
-                print(f"phenorover sim: {exc}", file=sys.stderr)
+    try:
+        s = _call(bus, MissionStatusQuery())
+        if s.in_progress and new:
+            print(f"aborting mission {s.mission}, left unfinished (its log and scans stay)")
+            _call(bus, MissionAbort())
+            gone = state.wait_for(lambda x: x.mission == s.mission and x.phase in FINAL_PHASES, 60)
+            if gone is None:
+                print(f"phenorover sim: mission {s.mission} did not abort in 60 s", file=sys.stderr)
                 return None
-    print(f"mission {s.mission} started", flush=True)
+        if s.in_progress and not new:
+            print(
+                f"mission {s.mission} was interrupted and is resumed ({s.scans_done}/"
+                f"{s.scans_total} scans done before); following it to its end "
+                "(--new aborts it and starts a new survey)",
+                flush=True,
+            )
+        else:
+            s = _call(bus, MissionStart(field=field))
+            print(f"mission {s.mission} started", flush=True)
+    except RpcError as exc:
+        print(f"phenorover sim: {exc}", file=sys.stderr)
+        return None
     last = ""
     end = time.monotonic() + timeout
     final: MissionState | None = None
@@ -113,7 +142,7 @@ def run_survey(
         if line != last:
             print(line, flush=True)
             last = line
-        if st.phase in FINAL:
+        if st.phase in FINAL_PHASES:
             final = st
             break
         time.sleep(0.5)

@@ -13,15 +13,13 @@ from __future__ import annotations
 
 import threading
 import time
-from pathlib import Path
 
 import msgspec
-import numpy as np
 
 from common import clock as clk
 from common import keys
-from common.field import FieldError, load_field
 from common.messages.mission import (
+    FINAL_PHASES,
     REGISTERING,
     MissionAbort,
     MissionCommand,
@@ -33,8 +31,7 @@ from common.messages.mission import (
     MissionState,
     MissionStatusQuery,
 )
-from common.messages.plan import PlanRequest, PlanResult
-from common.robot import scanner_model
+from common.messages.plan import PlanResult
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.config import MissionConfig
@@ -42,6 +39,7 @@ from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob
 from services.mission.runfiles import write_run_files
+from services.mission.sources import requested_plan, unfinished
 from services.mission.survey import Aborted, Survey
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
@@ -68,6 +66,11 @@ class MissionService:
         self.survey: Survey | None = None
         self._worker: threading.Thread | None = None
         self._registration: RegistrationJob | None = None
+        # an interrupted mission is taken up before the first command is served: a
+        # MissionStart arriving while the service starts is refused (the mission in
+        # progress named), never run beside the resumed one
+        if cfg.resume:
+            self.resume_unfinished()
         bus.serve(keys.MISSION_CMD, self.handle)
 
     def event(self, level: str, text: str) -> None:
@@ -105,14 +108,21 @@ class MissionService:
     def handle(self, cmd: MissionCommand) -> MissionState:
         match cmd:
             case MissionStart():
+                if self.active and self.phase in FINAL_PHASES:
+                    self._worker.join(timeout=5.0)  # type: ignore[union-attr]  # ending
                 if self.active:
-                    raise RequestError(f"mission {self.mission} is already running")
+                    raise RequestError(
+                        f"mission {self.mission} is in progress (phase {self.state().phase}); "
+                        "wait for its end, or end it with `phenorover mission abort`"
+                    )
                 self._start(cmd)
             case MissionPause():
                 self._paused.set()
+                self._persist_pause("paused")
                 self.event("info", "paused by operator")
             case MissionResume():
                 self._paused.clear()
+                self._persist_pause("running")
                 self.event("info", "resumed by operator")
             case MissionAbort():
                 self._abort.set()
@@ -122,45 +132,27 @@ class MissionService:
                 pass
         return self.state()
 
-    def _load_plan(self, cmd: MissionStart) -> PlanResult:
-        field = self.ctx.field
-        if cmd.field and cmd.field != field and Path(cmd.field).resolve() != Path(field).resolve():
-            # one field for the whole deployment: the simulated world, the planner and
-            # the mission must agree on what is being surveyed
-            raise RequestError(
-                f"MissionStart.field: {cmd.field!r} is not this deployment's field {field!r}"
-            )
-        if cmd.plan_file:
-            path = Path(cmd.plan_file).resolve()
-            if not path.is_relative_to(self.ctx.run_dir.resolve()):
-                raise RequestError(
-                    f"MissionStart.plan_file: {cmd.plan_file} is outside the run folder "
-                    f"{self.ctx.run_dir}"
-                )
-            try:
-                return msgspec.json.decode(path.read_bytes(), type=PlanResult)
-            except OSError as exc:
-                raise RequestError(
-                    f"MissionStart.plan_file: {cmd.plan_file}: {exc.strerror}"
-                ) from None
-            except msgspec.DecodeError as exc:
-                raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc}") from None
-        try:
-            return self.ctx.bus.call(
-                keys.PLANNER_PLAN,
-                PlanRequest(name=field, scanner=scanner_model(self.ctx.robot)),
-                timeout=self.cfg.plan_timeout_s,
-            )
-        except RpcError as exc:
-            raise RequestError(f"planner: {exc}") from None
+    def _persist_pause(self, state: str) -> None:
+        """An operator's pause outlives a restart of the service (a power cut): the
+        resumed mission waits for ``mission resume`` instead of driving off."""
+        m = self.log.mission() if self.active and self.log is not None else None
+        if self.log is not None and m is not None and m["state"] in ("running", "paused"):
+            self.log.set_state(state)
 
     def _start(self, cmd: MissionStart) -> None:
+        before = self.phase
         self.phase = MissionPhase.PLANNING
-        plan = self._load_plan(cmd)
+        try:
+            self._start_planned(cmd)
+        except RequestError:
+            self.phase = before  # a refused start leaves the state as it was
+            raise
+
+    def _start_planned(self, cmd: MissionStart) -> None:
+        plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s)
         try:
             segs = segments(plan)
         except ValueError as exc:
-            self.phase = MissionPhase.IDLE
             raise RequestError(str(exc)) from None
         name = cmd.mission or f"{plan.field}-{time.strftime('%Y%m%d-%H%M%S')}"
         path = self.ctx.run_dir / name / "mission.db"
@@ -178,11 +170,16 @@ class MissionService:
         self.plan = plan
         self._launch(name, log, segs)
 
-    def _launch(self, name: str, log: MissionLog, segs: list[Segment]) -> None:
+    def _launch(
+        self, name: str, log: MissionLog, segs: list[Segment], paused: bool = False
+    ) -> None:
         self.mission, self.log = name, log
         self._abort.clear()
         self._wake.clear()
-        self._paused.clear()
+        if paused:
+            self._paused.set()
+        else:
+            self._paused.clear()
         self.survey = Survey(
             self.ctx, self.cfg, log, name, self.event, self._wake, self._abort, self._paused
         )
@@ -199,43 +196,20 @@ class MissionService:
 
     def resume_unfinished(self) -> None:
         """Continue the newest unfinished mission in the run folder, if any."""
-        dbs = sorted(self.ctx.run_dir.glob("*/mission.db"), key=lambda p: p.stat().st_mtime)
-        for path in reversed(dbs):
-            log = MissionLog(path)
-            m = log.mission()
-            if m is not None and m["state"] in ("running", "paused"):
-                plan = msgspec.json.decode(m["plan_json"], type=PlanResult)
-                if not self._surveys_this_field(plan):
-                    # another deployment's survey (another field): driving its route
-                    # here would be driving blind; it stays as it is for its own
-                    self.event(
-                        "warning",
-                        f"mission {m['id']} surveys field {plan.field}, not this "
-                        f"deployment's ({self.ctx.field}): not resumed",
-                    )
-                    log.close()
-                    continue
-                nxt = log.next_step()
-                self.plan = plan
-                self._launch(m["id"], log, segments(plan))
-                self.event(
-                    "info",
-                    f"resuming mission {m['id']} at scan "
-                    f"{nxt.scan_id if nxt else 'none (returning home)'}",
-                )
-                return
-            log.close()
-
-    def _surveys_this_field(self, plan: PlanResult) -> bool:
-        """Whether ``plan`` is of the deployment's field: the same plots, wherever the
-        field file lies and whatever it is called."""
-        try:
-            _, fld = load_field(self.ctx.field)
-        except FieldError:
-            return False
-        boxes = np.asarray(plan.plot_boxes.numpy(), dtype=np.float64).reshape(-1, 6)
-        return boxes.shape == fld.plot_boxes.shape and bool(
-            np.allclose(boxes, fld.plot_boxes, atol=1e-6)
+        found = unfinished(
+            self.ctx.run_dir, self.ctx.field, lambda text: self.event("warning", text)
+        )
+        if found is None:
+            return
+        nxt = found.log.next_step()
+        self.plan = found.plan
+        self.phase = MissionPhase.SETTLING  # until the worker's first step says
+        self._launch(found.mission, found.log, segments(found.plan), paused=found.paused)
+        self.event(
+            "info",
+            f"resuming mission {found.mission} at scan "
+            f"{nxt.scan_id if nxt else 'none (returning home)'}"
+            + (" (paused by the operator: `phenorover mission resume`)" if found.paused else ""),
         )
 
     # --- the survey ---
@@ -243,6 +217,9 @@ class MissionService:
         log, sv = self.log, self.survey
         assert log is not None and sv is not None
         try:
+            # a resumed survey waits for the clock: every deadline is taken from it
+            if not self._clock_started(self._wake):
+                raise Aborted
             by_cand = {s.cand_id: s for s in segs if s.cand_id is not None}
             for step in log.steps():
                 if step.status in ("done", "failed", "skipped"):
@@ -268,15 +245,17 @@ class MissionService:
             if self.cfg.register_on_done:
                 self._register()  # its detail is set before the phase says done
             self.phase = MissionPhase.DONE
+        # the final phase is set last: whoever sees it may start the next mission at once
         except Aborted:
             if self._abort.is_set():
-                log.set_state("aborted")
-                self.phase = MissionPhase.ABORTED
-                self.event("warning", f"mission {self.mission} aborted")
                 sv._cancel("")
+                log.set_state("aborted")
+                self.event("warning", f"mission {self.mission} aborted")
+                self.phase = MissionPhase.ABORTED
         except RpcError as exc:
-            self.phase, self.detail = MissionPhase.FAILED, str(exc)
+            self.detail = str(exc)
             self.event("error", f"mission {self.mission} stopped: {exc}")
+            self.phase = MissionPhase.FAILED
 
     def _visit(self, idx: int, seg: Segment, tag: str) -> None:
         """Position, scan (with retries, each re-checking the pose), record."""
@@ -337,8 +316,6 @@ class MissionService:
         return False
 
     def run(self, stop: threading.Event) -> None:
-        if self.cfg.resume and self._clock_started(stop):
-            self.resume_unfinished()
         for _ in clk.ticks(self.ctx.clock, 1.0, stop):
             self.state_pub.put(self.state())
             if time.monotonic() - self._plan_sent >= PLAN_REPUBLISH_S:

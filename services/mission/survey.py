@@ -99,13 +99,16 @@ class Survey:
     def wait(self, seconds: float) -> int:
         """Wait ``seconds`` on the clock, and while paused; returns the time spent
         paused (ns), for deadlines that must not count it. Raises Aborted."""
-        if not clk.sleep(self.ctx.clock, seconds, self.wake):
-            raise Aborted
+        self.sleep(seconds)
         t0 = self.now()
         while self.paused.is_set():
-            if not clk.sleep(self.ctx.clock, 0.5, self.wake):
-                raise Aborted
+            self.sleep(0.5)
         return self.now() - t0
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` on the clock, paused or not. Raises Aborted."""
+        if not clk.sleep(self.ctx.clock, seconds, self.wake):
+            raise Aborted
 
     def call(self, rpc: Rpc[Q, R], req: Q) -> R:
         """``rpc`` answered, retried while its service is silent (restarting) for up
@@ -151,11 +154,23 @@ class Survey:
             raise RpcError(f"navigation refused route {rid}: {rep.reason}")
         return sent
 
-    def _follow(self, seg: Segment, rid: str, limit_ns: int) -> tuple[bool, str]:
+    def _follow(self, seg: Segment, route_id: str, limit_ns: int) -> tuple[bool, str]:
+        rid = route_id
         sent = renewed = t0 = self._send(seg, rid)
-        warned = False
+        warned, pauses = False, 0
         while True:
-            t0 += self.wait(0.1)
+            if self.paused.is_set():
+                # a pause stops the robot now, not when the lease runs out (metres
+                # later): the route is cancelled, and sent again from where the robot
+                # stands once resumed, under an id of its own (the cancelled route's
+                # outcome must not be taken for it)
+                self._cancel(rid)
+                t0 += self.wait(0.0)
+                pauses += 1
+                rid = f"{route_id}.p{pauses}"
+                sent = renewed = self._send(seg, rid)
+                continue
+            self.sleep(0.1)  # not wait(): a pause is seen above, while driving
             now = self.now()
             if now - t0 > limit_ns:
                 self._cancel(rid)

@@ -39,7 +39,6 @@ from services.viz import clouds, scene
 from services.viz.config import VizConfig
 from services.viz.outputs import Outputs
 
-FINAL = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
 # streams whose newest message is all the dashboard needs
 LATEST: dict[str, Topic[Any]] = {
     "pose": keys.NAV_POSE,
@@ -234,8 +233,7 @@ class VizService:
             self._set_static([scene.cell_entry(field, views)])
 
     def _on_state(self, s: MissionState) -> None:
-        active = s.mission and s.phase not in (*FINAL, MissionPhase.IDLE)
-        if active and self.out.open_mission(s.mission):
+        if s.in_progress and self.out.open_mission(s.mission):
             rec = self.out.mission_stream
             if rec is not None:
                 self.out.log_static(rec, self.static.values())

@@ -7,7 +7,7 @@ Writes ``docs/bench/soak.json`` and ``docs/soak.md`` after every run, each run w
 its date and commit, so a soak stopped half way keeps what it ran; ``--resume`` runs
 only what the JSON lacks (a whole soak is about four hours on two cores).
 
-    python tests/bench/soak.py [--runs 10] [--field NAME ...] [--resume]
+    python tests/bench/soak.py [--runs 10] [--field NAME ...] [--resume | --restart WHY]
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
@@ -46,6 +47,10 @@ origin_lon = 138.64
 row_bearing_deg = 150.0
 start_corner = "top-left"
 """
+HEAD = (
+    "| field | runs | passed | locations scanned | wall time per run (min-max) | failures |",
+    "|---|---|---|---|---|---|",
+)
 SUMMARY = re.compile(r"summary: (\S+): (\w+), (\d+)/(\d+) scans done, (\d+) failed")
 
 
@@ -82,10 +87,13 @@ def run_once(field: str, log: Path) -> dict[str, object]:
     why = "" if ok else reason(text)
     wall = time.monotonic() - t0
     when = {"date": time.strftime("%Y-%m-%d"), "commit": commit()}
-    return {"exit": code, "done": done, "total": total, "ok": ok, "wall_s": wall, "why": why} | when
+    # a run that took up a survey an earlier, stopped run left unfinished says so
+    resumed = "was interrupted and is resumed" in text
+    res = {"exit": code, "done": done, "total": total, "ok": ok, "wall_s": wall, "why": why}
+    return res | {"resumed": resumed} | when
 
 
-def render(rows: dict[str, list[dict[str, object]]]) -> str:
+def render(rows: dict[str, list[dict[str, object]]], earlier: list[dict[str, Any]]) -> str:
     when = sorted(
         {f"{r.get('date', '?')} at {r.get('commit', '?')}" for v in rows.values() for r in v}
     )
@@ -98,19 +106,32 @@ def render(rows: dict[str, list[dict[str, object]]]) -> str:
         "time) and the error models of docs/simulation.md. A run passes when it exits 0 "
         "with every location scanned.",
         "",
-        "| field | runs | passed | locations scanned | wall time per run (min-max) | failures |",
-        "|---|---|---|---|---|---|",
+        *HEAD,
     ]
-    for name, runs in rows.items():
-        walls = [float(r["wall_s"]) for r in runs]  # type: ignore[arg-type]
-        scanned = sum(int(r["done"]) for r in runs)  # type: ignore[call-overload]
-        total = sum(int(r["total"]) for r in runs)  # type: ignore[call-overload]
-        fails = "; ".join(f"run {i + 1}: {r['why']}" for i, r in enumerate(runs) if not r["ok"])
-        out.append(
-            f"| {name} | {len(runs)} | {sum(bool(r['ok']) for r in runs)} | {scanned}/{total} "
-            f"| {min(walls):.0f}-{max(walls):.0f} s | {fails or 'none'} |"
-        )
+    out += [table_row(name, runs) for name, runs in rows.items()]
+    if earlier:
+        out += [
+            "",
+            "Earlier runs, kept as they were; the count above started again after the fix "
+            "each names:",
+            "",
+            *HEAD,
+            *(table_row(f"{e['field']} ({e['until']})", e["runs"]) for e in earlier),
+        ]
     return "\n".join(out) + "\n"
+
+
+def table_row(name: str, runs: list[dict[str, object]]) -> str:
+    walls = [float(r["wall_s"]) for r in runs]  # type: ignore[arg-type]
+    scanned = sum(int(r["done"]) for r in runs)  # type: ignore[call-overload]
+    total = sum(int(r["total"]) for r in runs)  # type: ignore[call-overload]
+    fails = "; ".join(f"run {i + 1}: {r['why']}" for i, r in enumerate(runs) if not r["ok"])
+    resumed = [str(i + 1) for i, r in enumerate(runs) if r.get("resumed")]
+    note = f" (runs {', '.join(resumed)} took up a survey left unfinished)" if resumed else ""
+    return (
+        f"| {name} | {len(runs)} | {sum(bool(r['ok']) for r in runs)}{note} | {scanned}/{total} "
+        f"| {min(walls):.0f}-{max(walls):.0f} s | {fails or 'none'} |"
+    )
 
 
 def main() -> int:
@@ -119,16 +140,27 @@ def main() -> int:
     ap.add_argument("--field", nargs="*", default=None, help="spl, mini.geojson, strips.toml")
     ap.add_argument("--json", type=Path, default=BENCH_DIR / "soak.json")
     ap.add_argument("--resume", action="store_true", help="keep the runs the JSON holds")
+    ap.add_argument(
+        "--restart",
+        metavar="WHY",
+        default="",
+        help="start the count again (after a fix): the JSON's runs are kept as earlier ones",
+    )
     args = ap.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     rows: dict[str, list[dict[str, object]]] = {}
-    if args.resume and args.json.exists():
-        rows = json.loads(args.json.read_text())["fields"]
+    earlier: list[dict[str, Any]] = []
+    if (args.resume or args.restart) and args.json.exists():
+        kept = json.loads(args.json.read_text())
+        rows, earlier = kept["fields"], kept.get("earlier", [])
+    if args.restart:
+        earlier += [{"field": f, "until": args.restart, "runs": r} for f, r in rows.items() if r]
+        rows = {}
 
     def save() -> None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"fields": rows}, indent=1))
-        (REPO / "docs" / "soak.md").write_text(render(rows))
+        args.json.write_text(json.dumps({"fields": rows, "earlier": earlier}, indent=1))
+        (REPO / "docs" / "soak.md").write_text(render(rows, earlier))
 
     with tempfile.TemporaryDirectory(prefix="soak-") as scratch:
         for name, field in fields(Path(scratch)).items():

@@ -1,0 +1,108 @@
+"""Where a mission comes from: the plan a ``MissionStart`` asks for (a plan file in
+the run folder, or the planner's), or a mission a stopped service left unfinished in
+the run folder. Every refusal is one line naming what is wrong."""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from common import keys
+from common.field import FieldError, load_field
+from common.messages.mission import MissionStart
+from common.messages.plan import PlanRequest, PlanResult
+from common.robot import scanner_model
+from common.service import Context
+from common.transport import RequestError, RpcError
+from services.mission.log import MissionLog
+
+
+def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResult:
+    """The plan ``cmd`` asks for; RequestError naming the field at fault."""
+    field = ctx.field
+    if cmd.field and cmd.field != field and Path(cmd.field).resolve() != Path(field).resolve():
+        # one field for the whole deployment: the simulated world, the planner and
+        # the mission must agree on what is being surveyed
+        raise RequestError(
+            f"MissionStart.field: {cmd.field!r} is not this deployment's field {field!r}"
+        )
+    if cmd.plan_file:
+        path = Path(cmd.plan_file).resolve()
+        if not path.is_relative_to(ctx.run_dir.resolve()):
+            raise RequestError(
+                f"MissionStart.plan_file: {cmd.plan_file} is outside the run folder {ctx.run_dir}"
+            )
+        try:
+            return msgspec.json.decode(path.read_bytes(), type=PlanResult)
+        except OSError as exc:
+            raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc.strerror}") from None
+        except msgspec.DecodeError as exc:
+            raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc}") from None
+    try:
+        return ctx.bus.call(
+            keys.PLANNER_PLAN,
+            PlanRequest(name=field, scanner=scanner_model(ctx.robot)),
+            timeout=timeout,
+        )
+    except RpcError as exc:
+        raise RequestError(f"planner: {exc}") from None
+
+
+@dataclass
+class Unfinished:
+    """A mission to resume: its log (open), its plan, whether its operator paused it."""
+
+    mission: str
+    log: MissionLog
+    plan: PlanResult
+    paused: bool
+
+
+def unfinished(run_dir: Path, field: str, warn: Callable[[str], None]) -> Unfinished | None:
+    """The newest mission in the run folder still running or paused, of this
+    deployment's field. Another field's, or a log that cannot be read, is left as it
+    is, each with one ``warn`` line saying why."""
+    dbs = sorted(run_dir.glob("*/mission.db"), key=lambda p: p.stat().st_mtime)
+    for path in reversed(dbs):
+        log: MissionLog | None = None
+        try:
+            log = MissionLog(path)
+            m = log.mission()
+            if m is None or m["state"] not in ("running", "paused"):
+                log.close()
+                continue
+            plan = msgspec.json.decode(m["plan_json"], type=PlanResult)
+        except (sqlite3.Error, msgspec.DecodeError, TypeError) as exc:
+            if log is not None:
+                log.close()
+            warn(f"{path}: not a readable mission log ({exc}): not resumed")
+            continue
+        if not surveys_field(field, plan):
+            # another deployment's survey (another field): driving its route here
+            # would be driving blind; it stays as it is for its own
+            warn(
+                f"mission {m['id']} surveys field {plan.field}, not this deployment's "
+                f"({field}): not resumed"
+            )
+            log.close()
+            continue
+        return Unfinished(m["id"], log, plan, paused=m["state"] == "paused")
+    return None
+
+
+def surveys_field(field: str, plan: PlanResult) -> bool:
+    """Whether ``plan`` is of ``field``: the same plots, wherever the field file lies
+    and whatever it is called."""
+    try:
+        _, fld = load_field(field)
+    except FieldError:
+        return False
+    boxes = np.asarray(plan.plot_boxes.numpy(), dtype=np.float64).reshape(-1, 6)
+    return boxes.shape == fld.plot_boxes.shape and bool(
+        np.allclose(boxes, fld.plot_boxes, atol=1e-6)
+    )
