@@ -5,9 +5,10 @@ export elsewhere on the globe with rows at 30 deg, and a TOML field in the south
 hemisphere with rows at 150 deg). Every run must exit 0 with every location scanned.
 Writes ``docs/bench/soak.json`` and ``docs/soak.md`` after every run, each run with
 its date and commit, so a soak stopped half way keeps what it ran; ``--resume`` runs
-only what the JSON lacks (a whole soak is about four hours on two cores).
+only what the JSON lacks (a whole soak is about four hours on two cores). Without it
+the count starts again, and the runs the JSON held stay in it as earlier runs.
 
-    python tests/bench/soak.py [--runs 10] [--field NAME ...] [--resume | --restart WHY]
+    python tests/bench/soak.py [--runs 10] [--field NAME ...] [--resume | --why TEXT]
 """
 
 from __future__ import annotations
@@ -139,22 +140,23 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--field", nargs="*", default=None, help="spl, mini.geojson, strips.toml")
     ap.add_argument("--json", type=Path, default=BENCH_DIR / "soak.json")
-    ap.add_argument("--resume", action="store_true", help="keep the runs the JSON holds")
+    ap.add_argument("--resume", action="store_true", help="go on counting the JSON's runs")
     ap.add_argument(
-        "--restart",
-        metavar="WHY",
+        "--why",
         default="",
-        help="start the count again (after a fix): the JSON's runs are kept as earlier ones",
+        help="without --resume the count starts again and the JSON's runs are kept as "
+        "earlier ones, labelled with this (say, the fix that made them stale)",
     )
     args = ap.parse_args()
     os.environ.setdefault("RERUN_ANALYTICS", "0")
     rows: dict[str, list[dict[str, object]]] = {}
     earlier: list[dict[str, Any]] = []
-    if (args.resume or args.restart) and args.json.exists():
+    if args.json.exists():
         kept = json.loads(args.json.read_text())
         rows, earlier = kept["fields"], kept.get("earlier", [])
-    if args.restart:
-        earlier += [{"field": f, "until": args.restart, "runs": r} for f, r in rows.items() if r]
+    if not args.resume:
+        why = args.why or f"before the soak of {time.strftime('%Y-%m-%d')}"
+        earlier += [{"field": f, "until": why, "runs": r} for f, r in rows.items() if r]
         rows = {}
 
     def save() -> None:
