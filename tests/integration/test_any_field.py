@@ -89,12 +89,9 @@ status_timeout_s = 40.0
 max_fix_age_s = 2.0
 [services.nav.follower]
 # fine positioning to millimetres is nav-test's subject; these surveys need the scan
-# within the arrival tolerance (5 cm), and a shorter settle and centimetre targets
-# save minutes (the re-approach stays: a route can end centimetres to the side)
+# within the arrival tolerance, and a shorter settle saves minutes (the re-approach
+# stays: a route resumed after a pause can end centimetres to the side)
 fine_settle_s = 5.0
-fine_tolerance_m = 0.02
-fine_heading_tolerance_deg = 1.0
-reapproach_tolerance_m = 0.02
 {follower}
 [services.planner]
 [services.mission]
