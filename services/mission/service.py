@@ -108,8 +108,8 @@ class MissionService:
     def handle(self, cmd: MissionCommand) -> MissionState:
         match cmd:
             case MissionStart():
-                if self.active and self.phase in FINAL_PHASES:
-                    self._worker.join(timeout=5.0)  # type: ignore[union-attr]  # ending
+                if self._worker is not None and self.phase in FINAL_PHASES:
+                    self._worker.join(timeout=5.0)  # its final phase is its last act
                 if self.active:
                     raise RequestError(
                         f"mission {self.mission} is in progress (phase {self.state().phase}); "
@@ -135,8 +135,10 @@ class MissionService:
     def _persist_pause(self, state: str) -> None:
         """An operator's pause outlives a restart of the service (a power cut): the
         resumed mission waits for ``mission resume`` instead of driving off."""
-        m = self.log.mission() if self.active and self.log is not None else None
-        if self.log is not None and m is not None and m["state"] in ("running", "paused"):
+        if not self.active or self.log is None:
+            return
+        m = self.log.mission()
+        if m is not None and m["state"] in ("running", "paused"):  # not a finished one
             self.log.set_state(state)
 
     def _start(self, cmd: MissionStart) -> None:
