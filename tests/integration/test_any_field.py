@@ -69,6 +69,7 @@ run_dir = "{runs}"
 listen = ["tcp/127.0.0.1:{free_port()}"]
 [services.sim]
 real_time_factor = 20.0
+clock_hz = 20.0  # nav's rate; see tests/integration/test_mission.py
 {sim}
 [services.gnss]
 backend = "sim"
@@ -76,6 +77,7 @@ backend = "sim"
 rtk.canopy.noise_gain = 0.0
 [services.base]
 backend = "sim"
+rate_hz = 20.0
 # safety timers run on sim time: at 20x a process late by 25 ms of wall time is late by
 # half a second, so the field's allowances would trip on this machine's scheduling
 watchdog_s = 1.0
