@@ -24,6 +24,9 @@ from tests.conftest import Procs, Record, record
 from tests.integration.test_mission import Deployment
 
 TOLERANCE_M = 0.05  # the mission's arrival tolerance
+# the shipped simulator and base rates (deploy/sim.toml, the base's default): the
+# campaign judges the deployment as shipped, not the tests' lighter 20 Hz
+FIELD_HZ = 50.0
 STILL = 0.02  # m/s: below it the drivetrain's lag leaves millimetres to roll
 
 
@@ -117,7 +120,7 @@ def wait_driving(d: Deployment, scan: int) -> None:
 def kill_case(service: str, phase: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
-        d = Deployment(procs, tmp, extra)
+        d = Deployment(procs, tmp, extra, hz=FIELD_HZ)
         try:
             truth = Truth(d)
             s = d.start()
@@ -145,7 +148,7 @@ def stop_case(service: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         # real time: at 4x every millisecond of delivery and scheduling is four of sim time
         # and truth at 50 Hz, so that a stop is timed to 20 ms rather than 100 ms
-        d = Deployment(procs, tmp, rtf=1.0, field_timers=True, sim="truth_hz = 50.0")
+        d = Deployment(procs, tmp, rtf=1.0, field_timers=True, sim="truth_hz = 50.0", hz=FIELD_HZ)
         try:
             truth = Truth(d)
             d.start()
@@ -187,7 +190,7 @@ def power_cut(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
     simulator, killed with the rest, continues its world from its snapshot (a named
     deployment lets it across launchers)."""
     os.environ["PHENOROVER_SIM_DEPLOYMENT"] = f"power-cut-{os.getpid()}-{time.time_ns()}"
-    d = Deployment(procs, tmp)
+    d = Deployment(procs, tmp, hz=FIELD_HZ)
     try:
         truth = Truth(d)
         s = d.start()
@@ -239,7 +242,7 @@ def fault_case(
 
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         extra = (f"[services.scanner.sim_faults]\n{scanner}\n" if scanner else "") + sim
-        d = Deployment(procs, tmp, extra, rtf=rtf, field_timers=rtf <= 4)
+        d = Deployment(procs, tmp, extra, rtf=rtf, field_timers=rtf <= 4, hz=FIELD_HZ)
         try:
             truth = Truth(d)
             s = d.start()
@@ -296,7 +299,7 @@ def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float
     from common.messages.system import Health
     from tests.integration.test_fuzz import TOPIC_KEYS, absurd
 
-    d = Deployment(procs, tmp)
+    d = Deployment(procs, tmp, hz=FIELD_HZ)
     try:
         truth = Truth(d)
         beats: Record[Health] = record(d.bus, keys.HEALTH.at(service="*"))

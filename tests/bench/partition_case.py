@@ -20,7 +20,7 @@ from pathlib import Path
 from common import keys
 from common.messages.mission import MissionPhase
 from services.mission.log import MissionLog
-from tests.bench.fault_cases import Case, Truth, finish, survey_verdict
+from tests.bench.fault_cases import FIELD_HZ, Case, Truth, finish, survey_verdict
 from tests.conftest import Procs, record
 from tests.integration.test_mission import Deployment
 
@@ -59,7 +59,7 @@ def robot_namespace() -> Iterator[None]:
 
 def partition(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
     with robot_namespace():
-        d = Deployment(procs, tmp, host=NS_IP, wrap=("ip", "netns", "exec", NS))
+        d = Deployment(procs, tmp, host=NS_IP, wrap=("ip", "netns", "exec", NS), hz=FIELD_HZ)
         try:
             truth = Truth(d)
             seen = record(d.bus, keys.MISSION_EVENT)  # the base station's view
