@@ -302,7 +302,7 @@ class Survey:
         with self._lock:
             self._collect = []
         try:
-            self.call(keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission))
+            took = self.call(keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission))
         except RpcError as exc:
             # a device still busy with a failed scan (stuck, say) refuses the next:
             # end whatever it is doing before the next attempt
@@ -310,12 +310,19 @@ class Survey:
             self.wait(2.0)
             return f"start failed: {exc}"
         try:
-            return self._await_scan(step)
+            return self._await_scan(step, took.stamp_ns)
         finally:
             with self._lock:
                 self._collect = None
 
-    def _await_scan(self, step: Step) -> str:
+    def _await_scan(self, step: Step, since_ns: int = -1) -> str:
+        """Wait for ``step``'s scan to end and record it. ``since_ns``: the scanner's
+        own stamp of its reply to this attempt's StartScan; only statuses it stamped
+        later speak of this attempt. The scanner republishes its state every tick, so
+        the previous attempt's DONE (same scan id) keeps fresh stamps until the start
+        is handled, and the mission's clock is no judge of them: under load two
+        processes' sim clocks differ by seconds (a retried scan was once recorded from
+        such a DONE while the real one was taken on the drive to the next location)."""
         t0 = seen = self.now()
         while True:
             paused = self.wait(0.2)
@@ -327,7 +334,8 @@ class Survey:
             st = self.scanner.get()
             # a status from before this attempt (a retry follows an error for the
             # same scan id) says nothing about it
-            if st is None or st.stamp_ns < t0 or st.scan_id != step.scan_id:
+            stale = st is not None and (st.stamp_ns < t0 or st.stamp_ns <= since_ns)
+            if st is None or stale or st.scan_id != step.scan_id:
                 if (now - seen) / NS > self.cfg.scanner_lost_s:
                     lost = self.cfg.scanner_lost_s
                     return f"scanner lost the scan (no status for it in {lost:.0f} s)"

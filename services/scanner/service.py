@@ -74,18 +74,22 @@ class ScannerService:
                         self.client.pause()
                     case StopScan():
                         self.client.stop()
+                # stamped under the lock, as every status is: a status stamped after
+                # this reply was polled after the command (the mission relies on it)
+                stamp = self.ctx.clock.now_ns()
         except ScannerError as exc:
             raise RequestError(f"scanner: {exc}") from None
-        return ScannerReply(stamp_ns=self.ctx.clock.now_ns(), ok=True)
+        return ScannerReply(stamp_ns=stamp, ok=True)
 
     def status(self) -> ScannerStatus:
         with self._lock:
             s = self.client.poll(0.0)
+            stamp = self.ctx.clock.now_ns()
         sid = s.scan_id or 0
         done = s.state == ScanState.DONE and sid > 0
         inc = s.inclinometer
         return ScannerStatus(
-            stamp_ns=self.ctx.clock.now_ns(),
+            stamp_ns=stamp,
             frame_id="scanner",
             state=_STATES[s.state],
             scan_id=sid,
