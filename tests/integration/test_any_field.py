@@ -19,6 +19,7 @@ from common.geo import FieldFrame
 from services.mission.log import MissionLog
 from services.planner.core import plan
 from tests.conftest import Procs, free_port
+from tests.integration.test_mission import TEST_HZ
 
 ROWS_BEARING_DEG = 30.0
 MINI = FieldLayout(
@@ -69,7 +70,7 @@ run_dir = "{runs}"
 listen = ["tcp/127.0.0.1:{free_port()}"]
 [services.sim]
 real_time_factor = 20.0
-clock_hz = 20.0  # nav's rate; see tests/integration/test_mission.py
+clock_hz = {TEST_HZ}
 {sim}
 [services.gnss]
 backend = "sim"
@@ -77,7 +78,7 @@ backend = "sim"
 rtk.canopy.noise_gain = 0.0
 [services.base]
 backend = "sim"
-rate_hz = 20.0
+rate_hz = {TEST_HZ}
 # safety timers run on sim time: at 20x a process late by 25 ms of wall time is late by
 # half a second, so the field's allowances would trip on this machine's scheduling
 watchdog_s = 1.0

@@ -30,6 +30,9 @@ from tests.conftest import REPO, Procs, free_port, record
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
 SERVICES = {"sim", "gnss", "base", "scanner", "nav", "planner", "mission"}
+# the simulator's step and the base's rate in whole-survey tests: nav's own 20 Hz (see
+# Deployment's ``hz``)
+TEST_HZ = 20.0
 
 
 class Deployment:
@@ -54,7 +57,7 @@ class Deployment:
         sim: str = "",
         host: str = "127.0.0.1",
         wrap: Sequence[str] = (),
-        hz: float = 20.0,
+        hz: float = TEST_HZ,
     ) -> None:
         self.tmp, self.port = tmp, free_port()
         self.runs = tmp / "runs"
