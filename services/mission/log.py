@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import sqlite3
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,9 @@ class MissionLog:
         self.path = path
         path.parent.mkdir(parents=True, exist_ok=True)
         self.db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
+        # one connection, used by the survey's worker and the command handler (a pause
+        # written while a step is updated): sqlite3 does not serialise them itself
+        self._lock = threading.RLock()
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=FULL")  # a power cut must not lose a step
         self.db.executescript(SCHEMA)
@@ -45,7 +49,7 @@ class MissionLog:
         self.db.close()
 
     def _tx(self, sql: str, args: tuple[Any, ...] = ()) -> None:
-        with self.db:  # one transaction
+        with self._lock, self.db:  # one transaction
             self.db.execute("BEGIN")
             self.db.execute(sql, args)
 
@@ -58,7 +62,7 @@ class MissionLog:
         steps: list[tuple[int, int, float, float, float | None]],
     ) -> None:
         """Write the mission and its steps (scan_id, cand_id, x, y, yaw) at once."""
-        with self.db:
+        with self._lock, self.db:
             self.db.execute("BEGIN")
             self.db.execute(
                 "INSERT INTO mission VALUES (?, ?, ?, ?, 'running')",
@@ -70,13 +74,15 @@ class MissionLog:
             )
 
     def mission(self) -> dict[str, Any] | None:
-        return select_mission(self.db)
+        with self._lock:
+            return select_mission(self.db)
 
     def set_state(self, state: str) -> None:
         self._tx("UPDATE mission SET state = ?", (state,))
 
     def steps(self) -> list[Step]:
-        return select_steps(self.db)
+        with self._lock:
+            return select_steps(self.db)
 
     def next_step(self) -> Step | None:
         """The first step not finished (done, failed or skipped), in tour order."""
@@ -95,4 +101,5 @@ class MissionLog:
         self._tx("INSERT INTO events VALUES (?, ?, ?)", (stamp_ns, level, text))
 
     def events(self) -> list[Event]:
-        return select_events(self.db)
+        with self._lock:
+            return select_events(self.db)
