@@ -11,10 +11,10 @@ import pytest
 
 from common import keys
 from common.client import wait_alive
-from common.messages.scan import ScannerState, ScanProfile, StartScan
+from common.messages.scan import ScannerReply, ScannerState, ScanProfile, StartScan
 from common.messages.sim import RenderReply, RenderRequest
 from common.transport import Bus, RpcError
-from tests.conftest import Procs
+from tests.conftest import Procs, record
 
 
 def start(procs: Procs, ep: str, bus: Bus, tmp: Path, *sets: str) -> None:
@@ -40,13 +40,12 @@ def serve_render(bus: Bus, fail: bool = False) -> list[RenderRequest]:
     return seen
 
 
-def start_scan(bus: Bus, scan_id: int, resolution: int = 4, project: str = "") -> None:
+def start_scan(bus: Bus, scan_id: int, resolution: int = 4, project: str = "") -> ScannerReply:
     cmd = StartScan(profile=ScanProfile(scan_id=scan_id, resolution=resolution), project=project)
     deadline = time.monotonic() + 10
     while True:  # the queryable comes up a moment after the liveliness token
         try:
-            bus.call(keys.SCANNER_CMD, cmd, timeout=5)
-            return
+            return bus.call(keys.SCANNER_CMD, cmd, timeout=5)
         except RpcError as exc:
             if "no reply" not in str(exc) or time.monotonic() > deadline:
                 raise
@@ -69,6 +68,25 @@ def test_scan_runs_to_done_with_file_and_inclinometer(
     assert math.isclose(done.pitch, 0.01, abs_tol=1e-4)
     assert math.isclose(done.roll, -0.02, abs_tol=1e-4)
     assert [r.scan_id for r in renders] == [7]
+
+
+def test_a_status_stamped_after_a_retry_is_answered_speaks_of_the_retry(
+    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
+) -> None:
+    # the mission tells a retried scan's statuses from the previous attempt's DONE
+    # (same scan id, republished every tick) by the scanner's stamp on its answer
+    serve_render(client_bus)
+    statuses = record(client_bus, keys.SCANNER_STATUS)
+    start(procs, router_endpoint, client_bus, tmp_path)
+    start_scan(client_bus, 3)
+    assert statuses.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
+    reply = start_scan(client_bus, 3)
+    assert statuses.wait_for(lambda s: s.stamp_ns > reply.stamp_ns, timeout=10)
+    after = [s for s in statuses if s.stamp_ns > reply.stamp_ns]
+    assert after[0].state == ScannerState.SCANNING, after[0]
+    assert statuses.wait_for(
+        lambda s: s.state == ScannerState.DONE and s.stamp_ns > reply.stamp_ns, timeout=20
+    )
 
 
 def test_lost_ack_is_retried(

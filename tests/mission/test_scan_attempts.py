@@ -1,0 +1,132 @@
+"""A retried scan is recorded from its own end, never from the previous attempt's.
+
+The scanner republishes its state every tick, stamped by its own clock; a status it
+stamped before answering the retry's StartScan may reach the mission after that answer
+(delivery under load), and says DONE for the same scan id as the attempt the mission
+just rejected. The mission's clock cannot judge such a status: two processes' clocks
+differ by seconds under load. Once, a retried scan was recorded from that DONE while the
+real scan was taken on the drive to the next location, 4 m away.
+
+Here a scanner on the bus runs its clock 5 s ahead of the mission's and, for a second
+after answering, keeps delivering what it stamped before the answer: the previous
+attempt's DONE. The retry must wait for its own DONE (another file).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import msgspec
+import pytest
+import zenoh
+
+from common import keys
+from common.clock import WallClock
+from common.config import zenoh_config
+from common.messages.nav import PoseEstimate
+from common.messages.scan import ScannerReply, ScannerState, ScannerStatus, StartScan
+from common.service import Context
+from common.transport import Bus
+from services.mission.config import MissionConfig
+from services.mission.log import MissionLog
+from services.mission.survey import Survey
+
+NS = 1_000_000_000
+AHEAD_NS = 5 * NS  # the scanner's clock against the mission's
+X, Y = 10.5, 2.0  # the planned location
+
+
+class AheadScanner:
+    """A scanner whose clock runs ``AHEAD_NS`` ahead, left DONE by a first attempt at
+    scan 1 (``first.e57``). A StartScan is answered at once; for ``late_s`` after the
+    answer the statuses delivered are those stamped before it (the old DONE), then
+    it scans for ``scan_s`` and ends DONE with ``second.e57``. It also publishes the
+    navigation's pose, localized at the planned location, as a standing robot's."""
+
+    def __init__(self, bus: Bus, late_s: float = 1.0, scan_s: float = 1.0) -> None:
+        self.bus, self.late_s, self.scan_s = bus, late_s, scan_s
+        self.replied_ns: int | None = None  # the scanner's stamp of its answer
+        self.replied_wall = 0.0
+        self.stop = threading.Event()
+        self._status = bus.publisher(keys.SCANNER_STATUS)
+        self._pose = bus.publisher(keys.NAV_POSE)
+        bus.serve(keys.SCANNER_CMD, self._command)
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self.stop.set()
+        self._thread.join()
+
+    def now(self) -> int:
+        return time.time_ns() + AHEAD_NS
+
+    def _command(self, cmd: object) -> ScannerReply:
+        assert isinstance(cmd, StartScan), cmd
+        self.replied_wall = time.monotonic()
+        self.replied_ns = self.now()
+        return ScannerReply(ok=True, stamp_ns=self.replied_ns)
+
+    def status(self) -> ScannerStatus:
+        old = ScannerStatus(state=ScannerState.DONE, scan_id=1, progress=1.0, file="first.e57")
+        if self.replied_ns is None:
+            return msgspec.structs.replace(old, stamp_ns=self.now())
+        since = time.monotonic() - self.replied_wall
+        if since < self.late_s:  # stamped before the answer, delivered after it
+            return msgspec.structs.replace(old, stamp_ns=self.replied_ns - NS // 10)
+        if since < self.late_s + self.scan_s:
+            p = (since - self.late_s) / self.scan_s
+            return ScannerStatus(
+                state=ScannerState.SCANNING, scan_id=1, progress=p, stamp_ns=self.now()
+            )
+        return ScannerStatus(
+            state=ScannerState.DONE, scan_id=1, progress=1.0, file="second.e57", stamp_ns=self.now()
+        )
+
+    def _run(self) -> None:
+        while not self.stop.wait(0.05):
+            self._status.put(self.status())
+            self._pose.put(PoseEstimate(x=X, y=Y, yaw=0.0, localized=True, stamp_ns=self.now()))
+
+
+@pytest.fixture
+def scanner_bus(router_endpoint: str) -> Iterator[Bus]:
+    session = zenoh.open(zenoh_config("client", [], [router_endpoint]))
+    bus = Bus(session, "scanner")
+    yield bus
+    bus.close()
+    session.close()
+
+
+def test_a_retried_scan_waits_for_its_own_done(
+    client_bus: Bus, scanner_bus: Bus, tmp_path: Path
+) -> None:
+    scanner = AheadScanner(scanner_bus)
+    log = MissionLog(tmp_path / "mission.db")
+    log.create("m", "tiny", 0, "{}", [(1, 0, X, Y, 0.0)])
+    # the first attempt ended without a usable pose: this is the retry
+    log.update(0, status="scanning", attempts=1)
+    events: list[tuple[str, str]] = []
+    ctx = Context("mission", "test", client_bus, WallClock(), logging.getLogger("t"), tmp_path)
+    wake, abort, paused = threading.Event(), threading.Event(), threading.Event()
+    survey = Survey(
+        ctx, MissionConfig(), log, "m", lambda lv, t: events.append((lv, t)), wake, abort, paused
+    )
+    try:
+        seen = survey.scanner.wait_for(lambda s: s.file == "first.e57", timeout=10)
+        assert seen is not None, "the scanner's status never reached the mission"
+        step = log.steps()[0]
+        why = survey.scan(step, MissionConfig().profile)
+        recorded = log.steps()[0]
+    finally:
+        scanner.close()
+        wake.set()
+        log.close()
+    assert why == "", (why, events)
+    assert recorded.status == "done"
+    assert recorded.file == "second.e57", "recorded from the previous attempt's DONE"
+    assert scanner.replied_ns is not None
