@@ -5,7 +5,8 @@ export elsewhere on the globe with rows at 30 deg, and a TOML field in the south
 hemisphere with rows at 150 deg). Every run must exit 0 with every location scanned.
 Writes ``docs/bench/soak.json`` and ``docs/soak.md`` after every run, each run with
 its date and commit, so a soak stopped half way keeps what it ran; ``--resume`` runs
-only what the JSON lacks (a whole soak is about four hours on two cores). Without it
+only what the JSON lacks (a whole soak is about four hours on two cores). A failed
+run's log is kept in runs/soak-failures/. Without it
 the count starts again, and the runs the JSON held stay in it as earlier runs.
 
     python tests/bench/soak.py [--runs 10] [--field NAME ...] [--resume | --why TEXT]
@@ -52,6 +53,8 @@ HEAD = (
     "| field | runs | passed | locations scanned | wall time per run (min-max) | failures |",
     "|---|---|---|---|---|---|",
 )
+# a failed run's log is kept here (ignored by git, like every run folder)
+FAILED_LOGS = REPO / "runs" / "soak-failures"
 SUMMARY = re.compile(r"summary: (\S+): (\w+), (\d+)/(\d+) scans done, (\d+) failed")
 
 
@@ -173,6 +176,11 @@ def main() -> int:
                 r = run_once(field, Path(scratch) / f"{name}-{i}.log")
                 rows[name].append(r)
                 save()
+                if not r["ok"]:  # the scratch folder goes: keep what tells why
+                    FAILED_LOGS.mkdir(parents=True, exist_ok=True)
+                    kept = FAILED_LOGS / f"{name}-{i + 1}-{r['commit']}.log"
+                    kept.write_bytes((Path(scratch) / f"{name}-{i}.log").read_bytes())
+                    print(f"its log: {kept}", flush=True)
                 verdict = "pass" if r["ok"] else f"FAIL: {r['why']}"
                 print(
                     f"{name} run {i + 1}/{args.runs}: {r['wall_s']:.0f} s, "
