@@ -25,8 +25,11 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# Unit tests on both cores (pytest-xdist); the integration tests, whole deployments with
+# timing bounds on their own processes, then run alone.
 pytest: $(STAMP)
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q -n 2 --ignore=tests/integration --ignore=tests/viz
+	$(BIN)/pytest -q tests/integration tests/viz
 
 test: lint typecheck pytest
 
