@@ -137,8 +137,12 @@ class VizService:
             while not stop.wait(1.0 / self.cfg.rate_hz):
                 self.tick()
         finally:
+            # what arrived since the last tick (the last scan's DONE, when the survey
+            # ended just before the deployment was stopped) is still drawn; the worker
+            # gets until well inside the launcher's 4 s grace, so the footer is written
+            self._guarded("last tick", self.tick)
             self._jobs.put(None)
-            worker.join(timeout=5.0)
+            worker.join(timeout=3.0)
             self.out.close()
             self.log.info("viz: %d messages superseded before being drawn", self.superseded)
 

@@ -95,6 +95,9 @@ max_fix_age_s = 2.0
 # within the arrival tolerance, and a shorter settle saves minutes (the re-approach
 # stays: a route resumed after a pause can end centimetres to the side)
 fine_settle_s = 5.0
+fine_tolerance_m = 0.02
+fine_heading_tolerance_deg = 1.0
+reapproach_tolerance_m = 0.02
 {follower}
 [services.planner]
 [services.mission]
