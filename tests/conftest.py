@@ -3,6 +3,7 @@ bus, and process management that fails a test which leaves a process behind."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -46,13 +47,22 @@ def router_endpoint() -> Iterator[str]:
     session.close()
 
 
+@contextlib.contextmanager
+def client(endpoint: str, name: str = "test") -> Iterator[Bus]:
+    """A bus on a client session of the router at ``endpoint``, closed on exit."""
+    session = zenoh.open(zenoh_config("client", [], [endpoint]))
+    bus = Bus(session, name)
+    try:
+        yield bus
+    finally:
+        bus.close()
+        session.close()
+
+
 @pytest.fixture
 def client_bus(router_endpoint: str) -> Iterator[Bus]:
-    session = zenoh.open(zenoh_config("client", [], [router_endpoint]))
-    bus = Bus(session, "test")
-    yield bus
-    bus.close()
-    session.close()
+    with client(router_endpoint) as bus:
+        yield bus
 
 
 class Procs:

@@ -22,11 +22,9 @@ from pathlib import Path
 
 import msgspec
 import pytest
-import zenoh
 
 from common import keys
 from common.clock import WallClock
-from common.config import zenoh_config
 from common.messages.nav import PoseEstimate
 from common.messages.scan import ScannerReply, ScannerState, ScannerStatus, StartScan
 from common.service import Context
@@ -34,6 +32,7 @@ from common.transport import Bus
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.survey import Survey
+from tests.conftest import client
 
 NS = 1_000_000_000
 AHEAD_NS = 5 * NS  # the scanner's clock against the mission's
@@ -95,11 +94,8 @@ class AheadScanner:
 
 @pytest.fixture
 def scanner_bus(router_endpoint: str) -> Iterator[Bus]:
-    session = zenoh.open(zenoh_config("client", [], [router_endpoint]))
-    bus = Bus(session, "scanner")
-    yield bus
-    bus.close()
-    session.close()
+    with client(router_endpoint, "scanner") as bus:
+        yield bus
 
 
 def test_a_retried_scan_waits_for_its_own_done(
