@@ -47,6 +47,11 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     obstacle_min_points: Annotated[int, msgspec.Meta(ge=1)] = 3
     obstacle_scans: Annotated[int, msgspec.Meta(ge=1)] = 2
     still_after_s: Pos = 1.0
+    # a leg ending farther than this outside the field's boundary is refused: the
+    # field's survey, the drive home and the experiments stay within metres of it, so
+    # such a route is mistyped or forged, not a survey (one 12,700 km away once set
+    # the robot turning towards it)
+    route_margin_m: Pos = 25.0
     # the dead-reckoning allowance: with no RTK-fixed position fused for this long the
     # robot is not localized and stops. 0.25 s (one fix at 10 Hz may go missing) at
     # 0.5 m/s is 0.125 m on odometry (a millimetre of drift); braking from 0.5 m/s

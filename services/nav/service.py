@@ -11,6 +11,7 @@ import numpy as np
 
 from common import clock as clk
 from common import keys
+from common.field import load_field
 from common.field_geojson import load_frame
 from common.geo import rot_zyx
 from common.messages.base import Imu, LaserScan, Odometry, Twist
@@ -19,6 +20,7 @@ from common.messages.nav import (
     LEASE_ENDED,
     CancelRoute,
     FollowRoute,
+    Leg,
     NavCommand,
     NavProgress,
     NavReply,
@@ -43,6 +45,8 @@ class NavService:
         check_limits(cfg, ctx.robot)
         self.mounts = Mounts.of(ctx.robot)
         self.frame = load_frame(ctx.field)
+        m_ = cfg.route_margin_m
+        self.route_box = load_field(ctx.field)[1].bounds + np.array([-m_, -m_, m_, m_])
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
         self.tilt = Tilt(cfg.tilt, ctx.robot.imu)
@@ -214,6 +218,9 @@ class NavService:
         with self._lock:
             match cmd:
                 case FollowRoute(route_id=rid, legs=legs, max_speed=vmax, lease_s=lease):
+                    if why := self._off_field(legs):
+                        self.ctx.log.warning("route %s refused: %s", rid, why)
+                        return NavReply(stamp_ns=now, accepted=False, reason=why)
                     self.follower.start(rid, legs, vmax, lease_until=t + lease, join=cmd.join)
                     self.ctx.log.info(
                         "route %s: %d legs, from leg %d", rid, len(legs), self.follower.leg
@@ -230,6 +237,19 @@ class NavService:
                     self.follower.cancel()
                     self.ctx.log.info("route %s cancelled", self.follower.route_id)
         return NavReply(stamp_ns=now, accepted=True)
+
+    def _off_field(self, legs: list[Leg]) -> str:
+        """Why the route is refused ("" if it is not): a leg ending more than
+        ``route_margin_m`` outside the field's boundary."""
+        x0, y0, x1, y1 = self.route_box
+        for k, lg in enumerate(legs):
+            for x, y in ((lg.x0, lg.y0), (lg.x1, lg.y1)):
+                if not (x0 <= x <= x1 and y0 <= y <= y1):
+                    return (
+                        f"leg {k} reaches ({x:.6g}, {y:.6g}) m, more than "
+                        f"{self.cfg.route_margin_m:g} m outside field {self.ctx.field}"
+                    )
+        return ""
 
     def _on_alive(self, token: str, alive: bool) -> None:
         """A mission that dies stops the robot at once rather than at its lease's end

@@ -225,6 +225,10 @@ def fuzz(
     assert max(p["stamp_ns"] for p in poses) <= clock.sim_ns  # no sim/clock from the future
     moving = [c for c in cmds if c.get("linear_x", 0.0) or c.get("angular_z", 0.0)]
     assert not moving, moving[:5]
+    # well-typed but absurd: a leg thousands of kilometres off the field is refused
+    far = FollowRoute(route_id="far", legs=[Leg(x0=0, y0=0, x1=9e6, y1=-9e6)])
+    r = bus.call(keys.NAV_CMD, far, timeout=5)
+    assert not r.accepted and "outside field engr" in r.reason, r
 
 
 def _fails(payload: bytes, typ: Any) -> int:
