@@ -45,8 +45,8 @@ class NavService:
         check_limits(cfg, ctx.robot)
         self.mounts = Mounts.of(ctx.robot)
         self.frame = load_frame(ctx.field)
-        m_ = cfg.route_margin_m
-        self.route_box = load_field(ctx.field)[1].bounds + np.array([-m_, -m_, m_, m_])
+        grow = cfg.route_margin_m
+        self.route_box = load_field(ctx.field)[1].bounds + np.array([-grow, -grow, grow, grow])
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
         self.tilt = Tilt(cfg.tilt, ctx.robot.imu)

@@ -120,7 +120,7 @@ def wait_driving(d: Deployment, scan: int) -> None:
 def kill_case(service: str, phase: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
-        d = Deployment(procs, tmp, extra, hz=FIELD_HZ)
+        d = Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True)
         try:
             truth = Truth(d)
             s = d.start()
@@ -148,7 +148,9 @@ def stop_case(service: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         # real time: at 4x every millisecond of delivery and scheduling is four of sim time
         # and truth at 50 Hz, so that a stop is timed to 20 ms rather than 100 ms
-        d = Deployment(procs, tmp, rtf=1.0, field_timers=True, sim="truth_hz = 50.0", hz=FIELD_HZ)
+        d = Deployment(
+            procs, tmp, rtf=1.0, field_timers=True, sim="truth_hz = 50.0", hz=FIELD_HZ, home=True
+        )
         try:
             truth = Truth(d)
             d.start()
@@ -190,7 +192,7 @@ def power_cut(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
     simulator, killed with the rest, continues its world from its snapshot (a named
     deployment lets it across launchers)."""
     os.environ["PHENOROVER_SIM_DEPLOYMENT"] = f"power-cut-{os.getpid()}-{time.time_ns()}"
-    d = Deployment(procs, tmp, hz=FIELD_HZ)
+    d = Deployment(procs, tmp, hz=FIELD_HZ, home=True)
     try:
         truth = Truth(d)
         s = d.start()
@@ -242,7 +244,7 @@ def fault_case(
 
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
         extra = (f"[services.scanner.sim_faults]\n{scanner}\n" if scanner else "") + sim
-        d = Deployment(procs, tmp, extra, rtf=rtf, field_timers=rtf <= 4, hz=FIELD_HZ)
+        d = Deployment(procs, tmp, extra, rtf=rtf, field_timers=rtf <= 4, hz=FIELD_HZ, home=True)
         try:
             truth = Truth(d)
             s = d.start()
@@ -299,7 +301,7 @@ def fuzz_deployment(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float
     from common.messages.system import Health
     from tests.integration.test_fuzz import TOPIC_KEYS, absurd
 
-    d = Deployment(procs, tmp, hz=FIELD_HZ)
+    d = Deployment(procs, tmp, hz=FIELD_HZ, home=True)
     try:
         truth = Truth(d)
         beats: Record[Health] = record(d.bus, keys.HEALTH.at(service="*"))

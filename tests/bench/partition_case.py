@@ -59,7 +59,9 @@ def robot_namespace() -> Iterator[None]:
 
 def partition(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
     with robot_namespace():
-        d = Deployment(procs, tmp, host=NS_IP, wrap=("ip", "netns", "exec", NS), hz=FIELD_HZ)
+        d = Deployment(
+            procs, tmp, host=NS_IP, wrap=("ip", "netns", "exec", NS), hz=FIELD_HZ, home=True
+        )
         try:
             truth = Truth(d)
             seen = record(d.bus, keys.MISSION_EVENT)  # the base station's view

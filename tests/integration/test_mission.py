@@ -45,7 +45,9 @@ class Deployment:
     address and a command to run the deployment under (another network namespace).
     ``hz``: the simulator's physics and clock step and the base's rate; 20 Hz, the rate
     nav steers at, keeps seven processes at 20x within two cores (at the shipped 50 Hz
-    nav falls behind its odometry), and the fault campaign asks for the shipped 50."""
+    nav falls behind its odometry), and the fault campaign asks for the shipped 50.
+    ``home``: drive back to the Origin after the last scan, as shipped (the campaign);
+    the tests leave that leg to test_any_field's ``phenorover sim``."""
 
     def __init__(
         self,
@@ -58,6 +60,7 @@ class Deployment:
         host: str = "127.0.0.1",
         wrap: Sequence[str] = (),
         hz: float = TEST_HZ,
+        home: bool = False,
     ) -> None:
         self.tmp, self.port = tmp, free_port()
         self.runs = tmp / "runs"
@@ -105,8 +108,7 @@ follower.reapproach_tolerance_m = 0.02
 [services.planner]
 [services.mission]
 settle_s = 1.0
-# the drive home is test_any_field's (phenorover sim); here it would only add a leg
-return_to_origin = false
+return_to_origin = {str(home).lower()}
 {lease}
 {extra}""")
         self.log = tmp / "up.log"
