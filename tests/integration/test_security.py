@@ -59,8 +59,13 @@ class Robot:
         self.session = zenoh.open(zenoh_config("client", [], [local_ep]))
         self.seen: list[str] = []
         self._cv = threading.Condition()
-        for key in (keys.BASE_CMD_VEL.key, "phenorover/health/*"):
-            self.session.declare_subscriber(key, lambda s: self._saw(str(s.key_expr)))
+        # One subscriber for both: zenoh-python runs each callback on its own thread,
+        # so only one subscriber sees a link's samples in the order they were sent.
+        wanted = (keys.BASE_CMD_VEL.key, "phenorover/health/")
+        self.session.declare_subscriber(
+            "phenorover/**",
+            lambda s: self._saw(k) if (k := str(s.key_expr)).startswith(wanted) else None,
+        )
         for key in (keys.MISSION_CMD.key, keys.SCANNER_CMD.key):
             self.session.declare_queryable(key, self._answer)
 
