@@ -28,8 +28,8 @@ typecheck: $(STAMP)
 # Unit tests on both cores (pytest-xdist); the integration tests, whole deployments with
 # timing bounds on their own processes, then run alone.
 pytest: $(STAMP)
-	$(BIN)/pytest -q -n 2 --ignore=tests/integration --ignore=tests/viz
-	$(BIN)/pytest -q tests/integration tests/viz
+	$(BIN)/pytest -q -n 2 --durations=10 --ignore=tests/integration --ignore=tests/viz
+	$(BIN)/pytest -q --durations=15 tests/integration tests/viz
 
 test: lint typecheck pytest
 

@@ -4,6 +4,7 @@ make the deployment's certificates."""
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import sys
 import time
@@ -158,6 +159,25 @@ def cmd_sim(args: argparse.Namespace) -> int:
         return 1
 
 
+# command -> (module with ``add_command(parser)``, help): imported when the command runs
+LAZY = {
+    "plan": ("services.planner.cli", "plan scan locations and the route for a field"),
+    "nav-test": ("phenorover.eval.navtest", "run one of the paper's navigation experiments"),
+    "mission": ("services.mission.cli", "control the mission service"),
+    "register": ("services.register.cli", "register a mission's scans and write its report"),
+    "eval": ("phenorover.eval.cli", "score a simulated run against the simulator's truth"),
+}
+
+
+def _command(argv: Sequence[str] | None) -> str | None:
+    """The command ``argv`` names (None: none, e.g. ``--help``), before parsing."""
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--log-level")
+    pre.add_argument("cmd", nargs="?")
+    known, _ = pre.parse_known_args(sys.argv[1:] if argv is None else argv)
+    return known.cmd
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="phenorover", description=__doc__)
     p.add_argument("--log-level", default="info")
@@ -205,39 +225,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.add_argument("--register-timeout", type=float, default=600.0, metavar="S")
     s.set_defaults(func=cmd_sim)
 
-    from services.planner.cli import add_arguments, cmd_plan
+    # Commands with heavy imports (OR-Tools, numba, Open3D, matplotlib): only the one
+    # asked for is imported, so `phenorover status` or `certs` starts in a fraction of
+    # a second rather than three.
+    chosen = _command(argv)
+    for name, (module, helptext) in LAZY.items():
+        s = sub.add_parser(name, help=helptext)
+        if name == chosen:
+            importlib.import_module(module).add_command(s)
 
-    s = sub.add_parser("plan", help="plan scan locations and the route for a field")
-    add_arguments(s)
-    s.set_defaults(func=cmd_plan)
-
-    from phenorover.eval import navtest
-
-    s = sub.add_parser("nav-test", help="run one of the paper's navigation experiments")
-    navtest.add_arguments(s)
-    s.set_defaults(func=navtest.run)
-
-    from services.mission.cli import add_mission_arguments, cmd_mission
-
-    s = sub.add_parser("mission", help="control the mission service")
-    add_mission_arguments(s)
-    s.set_defaults(func=cmd_mission)
-
-    from services.register.cli import add_arguments as add_register_arguments
-    from services.register.cli import cmd_register
-
-    s = sub.add_parser("register", help="register a mission's scans and write its report")
-    add_register_arguments(s)
-    s.set_defaults(func=cmd_register)
-
-    from phenorover.eval.register import cli as eval_register
-
-    s = sub.add_parser("eval", help="score a simulated run against the simulator's truth")
-    evals = s.add_subparsers(dest="what", required=True)
-    e = evals.add_parser("register", help="score a registration against the true poses")
-    eval_register.add_arguments(e)
-    e.set_defaults(func=eval_register.run)
-
+    args = p.parse_args(argv)
     args = p.parse_args(argv)
     setup_logging(args.log_level)
     code: int = args.func(args)

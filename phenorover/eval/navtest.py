@@ -177,6 +177,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_command(p: argparse.ArgumentParser) -> None:
+    """``phenorover nav-test``."""
+    add_arguments(p)
+    p.set_defaults(func=run)
+
+
 def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) -> dict[str, Any]:
     _, fld = load_field(load_manifest(args.manifest).field)
     if args.experiment == "stationary":

@@ -77,6 +77,12 @@ def cmd_mission(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_command(p: argparse.ArgumentParser) -> None:
+    """``phenorover mission``."""
+    add_mission_arguments(p)
+    p.set_defaults(func=cmd_mission)
+
+
 def _call(bus: Bus, cmd: MissionCommand) -> MissionState:
     """One mission command; a service that is alive but not serving yet (no reply)
     is asked again for up to 30 s."""

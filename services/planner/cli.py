@@ -138,3 +138,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     files = write_all(result, out)
     print("wrote " + ", ".join(str(p) for p in files.values()))
     return 0
+
+
+def add_command(p: argparse.ArgumentParser) -> None:
+    """``phenorover plan``."""
+    add_arguments(p)
+    p.set_defaults(func=cmd_plan)

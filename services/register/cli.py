@@ -193,6 +193,12 @@ def cmd_register(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_command(p: argparse.ArgumentParser) -> None:
+    """``phenorover register``."""
+    add_arguments(p)
+    p.set_defaults(func=cmd_register)
+
+
 def main(argv: list[str] | None = None) -> int:
     from common.service import setup_logging
 

@@ -1,6 +1,6 @@
 """Whole surveys of a small field with every service as its own process under
-``phenorover up``: complete, killed mid-scan and resumed, a failing scanner, pause and
-resume from a second process, a malformed plan."""
+``phenorover up``: complete, killed mid-scan and resumed, a failing scanner (with the
+dashboard's recording), pause and resume from a second process, a malformed plan."""
 
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ from common.messages.sim import TruthPose
 from common.transport import Bus, RpcError
 from services.mission.log import MissionLog
 from tests.conftest import REPO, Procs, free_port, record
+from tests.viz import rrd
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
 SERVICES = {"sim", "gnss", "base", "scanner", "nav", "planner", "mission"}
@@ -243,13 +244,22 @@ def test_complete_mission_with_pause_and_resume_from_another_process(
     assert sorted(d.scans_started()) == [1, 2, 3]
 
 
-@pytest.mark.parametrize(
-    "deployment",
-    ["scan_retries = 1\n[services.scanner.sim_faults]\nerror_code = 42\nerror_scan_ids = [2]\n"],
-    indirect=True,
+# a scanner failing scan 2 (both attempts), and the dashboard saving one .rrd per mission
+FAILING_SCANNER_AND_VIZ = (
+    "scan_retries = 1\n[services.scanner.sim_faults]\nerror_code = 42\nerror_scan_ids = [2]\n"
+    '[services.viz]\nsave = "{run_dir}/{mission}/survey.rrd"\n'
 )
-def test_failing_scanner_marks_the_location_failed_and_goes_on(deployment: Deployment) -> None:
+
+
+@pytest.mark.parametrize("deployment", [FAILING_SCANNER_AND_VIZ], indirect=True)
+def test_failing_scanner_marks_the_location_failed_and_the_recording_holds_the_rest(
+    deployment: Deployment,
+) -> None:
+    """One survey for two subjects (each survey is most of a minute of CI): the failed
+    location, and the dashboard's recording checked with rerun's own tools (it
+    verifies and holds the field, route, robot and the clouds of the scans taken)."""
     d = deployment
+    assert wait_alive(d.session, {*SERVICES, "viz"}, timeout=60)
     s = d.start()
     final = d.wait(lambda x: x.mission == s.mission and x.phase == MissionPhase.DONE)
     assert final.scans_done == 2 and final.scans_failed == 1
@@ -258,6 +268,34 @@ def test_failing_scanner_marks_the_location_failed_and_goes_on(deployment: Deplo
     assert steps[1].attempts == 2 and (steps[1].reason or "").startswith("scanner error")
     events = [text for _, _, text in db(d, s.mission).events()]
     assert any("scan 2" in t and "failed" in t for t in events)
+
+    d.close()  # the footer is written when the dashboard stops
+    d.up.send_signal(signal.SIGTERM)
+    assert d.up.wait(timeout=20) == 0
+    path = d.runs / s.mission / "survey.rrd"
+    assert path.exists(), sorted(p.name for p in (d.runs / s.mission).iterdir())
+    r = rrd.verify(path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    paths = rrd.entity_paths(path)
+    expected = {
+        "/field/plots",
+        "/field/cells",
+        "/field/selected",
+        "/route/legs",
+        "/robot/estimate",
+        "/robot/estimate/body",
+        "/robot/truth",
+        "/robot/trail/0000",
+        "/gnss/fix1",
+        "/gnss/fix2",
+        "/errors/cross_track_m",
+        "/mission/log",
+        "/scanner/progress",
+        "/clouds/scan_001",
+        "/clouds/scan_003",
+    }
+    assert expected <= paths, f"missing {sorted(expected - paths)}; have {sorted(paths)}"
+    assert "/clouds/scan_002" not in paths  # the failed location has no cloud
 
 
 def true_stops(d: Deployment, mission: str, truth: list[TruthPose]) -> list[float]:

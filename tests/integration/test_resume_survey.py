@@ -1,6 +1,7 @@
 """A deployment stopped mid-survey and started again: the mission service resumes
 the survey before it serves a command (an operator's pause included), and ``phenorover
-sim``'s survey follows it to its end, or with ``--new`` aborts it and starts its own."""
+sim``'s survey follows it to its end, or with ``--new`` aborts it and starts its own.
+One test: each deployment's start-up costs seconds of CI."""
 
 from __future__ import annotations
 
@@ -38,9 +39,12 @@ def deploy(procs: Procs, tmp_path: Path) -> Iterator[Callable[[], Deployment]]:
         d.close()
 
 
-def test_a_survey_resumed_after_a_stop_is_followed_to_its_end(
+def test_a_resumed_survey_is_followed_to_its_end_and_new_aborts_an_unfinished_one(
     deploy: Callable[[], Deployment], capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """Three deployments in one run folder: the first stopped paused on the way to scan
+    2; the second resumes that survey and follows it to its end, then is stopped on the
+    way to scan 1 of another; the third, under ``--new``, aborts that one."""
     d = deploy()
     s = d.start()
     d.wait(lambda x: x.phase == MissionPhase.DRIVING and x.current_scan == 2)
@@ -62,13 +66,8 @@ def test_a_survey_resumed_after_a_stop_is_followed_to_its_end(
     assert f"mission {s.mission} was interrupted and is resumed" in out
     assert [st.status for st in db(d, s.mission).steps()] == ["done"] * 3
 
-
-def test_sim_new_aborts_the_unfinished_survey_and_starts_its_own(
-    deploy: Callable[[], Deployment], capsys: pytest.CaptureFixture[str]
-) -> None:
-    d = deploy()
     old = d.start()
-    d.wait(lambda x: x.phase == MissionPhase.DRIVING and x.current_scan == 1)
+    d.wait(lambda x: x.mission == old.mission and x.phase == MissionPhase.DRIVING)
     d.stop()
 
     d = deploy()
