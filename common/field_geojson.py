@@ -79,14 +79,20 @@ def field_frame(layout: FieldLayout) -> FieldFrame:
     )
 
 
-def load_frame(source: str) -> FieldFrame:
-    """The field frame of a field file or example (what every service of a deployment
-    shares); raises FieldError when it cannot be read or is not georeferenced."""
-    layout, _ = load_field(source)
+def load_georeferenced(source: str) -> tuple[FieldFrame, Field]:
+    """The field frame (what every service of a deployment shares) and the field of a
+    field file or example, read once; raises FieldError when it cannot be read or is
+    not georeferenced."""
+    layout, fld = load_field(source)
     try:
-        return field_frame(layout)
+        return field_frame(layout), fld
     except ValueError as exc:
         raise FieldError(f"{source}: {exc}") from None
+
+
+def load_frame(source: str) -> FieldFrame:
+    """The field frame of a field file or example (see :func:`load_georeferenced`)."""
+    return load_georeferenced(source)[0]
 
 
 def field_to_wgs84(layout: FieldLayout, xy: F64) -> F64:

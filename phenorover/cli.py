@@ -235,7 +235,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             importlib.import_module(module).add_command(s)
 
     args = p.parse_args(argv)
-    args = p.parse_args(argv)
     setup_logging(args.log_level)
     code: int = args.func(args)
     return code

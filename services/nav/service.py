@@ -11,8 +11,7 @@ import numpy as np
 
 from common import clock as clk
 from common import keys
-from common.field import load_field
-from common.field_geojson import load_frame
+from common.field_geojson import load_georeferenced
 from common.geo import rot_zyx
 from common.messages.base import Imu, LaserScan, Odometry, Twist
 from common.messages.gnss import GnssHeading, NavSatFix
@@ -44,9 +43,9 @@ class NavService:
         self.ctx, self.cfg = ctx, cfg
         check_limits(cfg, ctx.robot)
         self.mounts = Mounts.of(ctx.robot)
-        self.frame = load_frame(ctx.field)
+        self.frame, fld = load_georeferenced(ctx.field)
         grow = cfg.route_margin_m
-        self.route_box = load_field(ctx.field)[1].bounds + np.array([-grow, -grow, grow, grow])
+        self.route_box = fld.bounds + np.array([-grow, -grow, grow, grow])
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
         self.tilt = Tilt(cfg.tilt, ctx.robot.imu)
