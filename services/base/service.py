@@ -32,15 +32,22 @@ class BaseService:
         ctx.bus.subscribe(keys.BASE_CMD_VEL, self._on_cmd)
         ctx.bus.subscribe(keys.BASE_ESTOP, self._on_estop)
         self._commanders: set[str] = set()  # liveliness tokens of the commander
+        # the last commander is gone: its commands still in flight (delivered on
+        # another thread than its token's end) are void until a commander is back
+        self._orphaned = False
         ctx.bus.watch_alive(self._on_alive)
 
+    # Every send to the wheels is made under the lock, so a stop (e-stop, commander
+    # gone) is never followed by a command computed before it on another thread.
     def _on_cmd(self, t: Twist) -> None:
         now = self.ctx.clock.now_ns()
         with self._lock:
+            if self._orphaned:
+                return
             self.gate.command(t.linear_x, t.angular_z, now)
             v, w = self.gate.output(now)
-        if v == 0.0 and w == 0.0:  # a stop goes to the wheels now, not at the next tick
-            self.drive.send(0.0, 0.0, now)
+            if v == 0.0 and w == 0.0:  # a stop goes to the wheels now, not at the next tick
+                self.drive.send(0.0, 0.0, now)
 
     def _on_estop(self, e: EStop) -> None:
         with self._lock:
@@ -49,24 +56,27 @@ class BaseService:
                     "e-stop %s %s", "asserted" if e.asserted else "released", e.reason
                 )
             self.gate.set_estop(e.asserted, e.reason)
-        if e.asserted:
-            self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
+            if e.asserted:
+                self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
 
     def _on_alive(self, token: str, alive: bool) -> None:
         a = parse_token(token)
         if a is None or a.service != self.cfg.commander:
             return
         if alive:
-            self._commanders.add(token)
+            with self._lock:
+                self._commanders.add(token)
+                self._orphaned = False
             return
         if token not in self._commanders:
             return
-        self._commanders.discard(token)
         now = self.ctx.clock.now_ns()
         with self._lock:
+            self._commanders.discard(token)
+            self._orphaned = not self._commanders
             moving = self.gate.output(now) != (0.0, 0.0)
             self.gate.hold()
-        self.drive.send(0.0, 0.0, now)
+            self.drive.send(0.0, 0.0, now)
         if moving:
             self.ctx.log.warning("%s is gone (%s): wheels stopped", a.service, a.machine)
 
@@ -101,12 +111,12 @@ class BaseService:
                 v, w = self.gate.output(now)
                 wd = self.gate.watchdog_tripped(now)
                 estop = self.gate.estop
+                self.drive.send(v, w, now)
             if wd and not tripped and not estop:
                 self.ctx.log.info(
                     "watchdog: no command for %.1f s, wheels stopped", self.cfg.watchdog_s
                 )
             tripped = wd
-            self.drive.send(v, w, now)
             self.status_pub.put(BaseStatus(stamp_ns=now, stopped_by_watchdog=wd, estop=estop))
         self.drive.send(0.0, 0.0, self.ctx.clock.now_ns())
 

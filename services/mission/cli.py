@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -108,10 +109,13 @@ def run_survey(
     and scans stay). ``problems`` gets the text of every error event of the mission (a
     location skipped or failed, and why)."""
     seen: list[MissionEvent] = []
+    heard = threading.Condition()
 
     def on_event(e: MissionEvent) -> None:
-        seen.append(e)
         print(f"  [{e.stamp_ns / 1e9:8.1f} s sim] {e.level}: {e.text}", flush=True)
+        with heard:
+            seen.append(e)
+            heard.notify_all()
 
     bus.subscribe(keys.MISSION_EVENT, on_event)
     state = bus.latest(keys.MISSION_STATE)
@@ -156,5 +160,14 @@ def run_survey(
         print(f"phenorover sim: mission not finished after {timeout:.0f} s", file=sys.stderr)
         final = state.get()
     if problems is not None:
+        # events come on their own subscriber, unordered with the state: the mission's
+        # own last word ("mission NAME done", "... aborted") says every event before it
+        # is in
+        word = f"mission {s.mission} "
+        with heard:
+            heard.wait_for(
+                lambda: any(e.mission == s.mission and e.text.startswith(word) for e in seen),
+                timeout=5.0,
+            )
         problems.extend(e.text for e in list(seen) if e.mission == s.mission and e.level == "error")
     return final

@@ -40,7 +40,7 @@ from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob
 from services.mission.runfiles import write_run_files
 from services.mission.sources import requested_plan, unfinished
-from services.mission.survey import Aborted, Survey
+from services.mission.survey import Aborted, Feeds, Survey
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0
@@ -65,7 +65,12 @@ class MissionService:
         self._wake = threading.Event()  # abort or stop: ends every wait at once
         self.survey: Survey | None = None
         self._worker: threading.Thread | None = None
-        self._registration: RegistrationJob | None = None
+        self._registrations: list[RegistrationJob] = []
+        # one start at a time: a second MissionStart while one is being planned (up to
+        # plan_timeout_s) is refused, never run as a second survey beside the first
+        self._starting = threading.Lock()
+        # the survey's feeds, subscribed once for every survey this service runs
+        self.feeds = Feeds(bus)
         # an interrupted mission is taken up before the first command is served: a
         # MissionStart arriving while the service starts is refused (the mission in
         # progress named), never run beside the resumed one
@@ -73,12 +78,17 @@ class MissionService:
             self.resume_unfinished()
         bus.serve(keys.MISSION_CMD, self.handle)
 
-    def event(self, level: str, text: str) -> None:
+    def event(
+        self, level: str, text: str, log: MissionLog | None = None, mission: str | None = None
+    ) -> None:
+        """Report on the current mission, or on ``mission`` (logged to ``log``)."""
         now = self.ctx.clock.now_ns()
         getattr(self.ctx.log, "warning" if level == "warning" else level)("%s", text)
-        if self.log is not None:
-            self.log.event(now, level, text)
-        self.event_pub.put(MissionEvent(stamp_ns=now, mission=self.mission, level=level, text=text))
+        log = log or self.log
+        if log is not None:
+            log.event(now, level, text)
+        name = self.mission if mission is None else mission
+        self.event_pub.put(MissionEvent(stamp_ns=now, mission=name, level=level, text=text))
 
     def state(self) -> MissionState:
         done = failed = total = 0
@@ -108,14 +118,23 @@ class MissionService:
     def handle(self, cmd: MissionCommand) -> MissionState:
         match cmd:
             case MissionStart():
-                if self._worker is not None and self.phase in FINAL_PHASES:
-                    self._worker.join(timeout=5.0)  # its final phase is its last act
-                if self.active:
+                if not self._starting.acquire(blocking=False):
                     raise RequestError(
-                        f"mission {self.mission} is in progress (phase {self.state().phase}); "
-                        "wait for its end, or end it with `phenorover mission abort`"
+                        "another MissionStart is being planned; wait for its reply "
+                        "(`phenorover mission status`)"
                     )
-                self._start(cmd)
+                try:
+                    if self._worker is not None and self.phase in FINAL_PHASES:
+                        self._worker.join(timeout=5.0)  # its final phase is its last act
+                    if self.active:
+                        raise RequestError(
+                            f"mission {self.mission} is in progress (phase "
+                            f"{self.state().phase}); wait for its end, or end it with "
+                            "`phenorover mission abort`"
+                        )
+                    self._start(cmd)
+                finally:
+                    self._starting.release()
             case MissionPause():
                 self._paused.set()
                 self._persist_pause("paused")
@@ -143,6 +162,12 @@ class MissionService:
 
     def _start(self, cmd: MissionStart) -> None:
         before = self.phase
+        # cleared before planning, not at the launch: an abort or a pause the operator
+        # sends while the planner works is for this mission, and its worker obeys it
+        # from its first step (the robot never drives off after an abort)
+        self._abort.clear()
+        self._wake.clear()
+        self._paused.clear()
         self.phase = MissionPhase.PLANNING
         try:
             self._start_planned(cmd)
@@ -172,18 +197,22 @@ class MissionService:
         self.plan = plan
         self._launch(name, log, segs)
 
-    def _launch(
-        self, name: str, log: MissionLog, segs: list[Segment], paused: bool = False
-    ) -> None:
+    def _launch(self, name: str, log: MissionLog, segs: list[Segment]) -> None:
+        """Run the survey of ``log`` on a worker; the operator's abort and pause are
+        set (or cleared) by the caller, before planning."""
         self.mission, self.log = name, log
-        self._abort.clear()
-        self._wake.clear()
-        if paused:
-            self._paused.set()
-        else:
-            self._paused.clear()
+        if self._paused.is_set():
+            log.set_state("paused")  # a pause sent while planning outlives a restart too
         self.survey = Survey(
-            self.ctx, self.cfg, log, name, self.event, self._wake, self._abort, self._paused
+            self.ctx,
+            self.cfg,
+            self.feeds,
+            log,
+            name,
+            self.event,
+            self._wake,
+            self._abort,
+            self._paused,
         )
         self._worker = threading.Thread(target=self._run_mission, args=(segs,), daemon=True)
         self._worker.start()
@@ -206,7 +235,11 @@ class MissionService:
         nxt = found.log.next_step()
         self.plan = found.plan
         self.phase = MissionPhase.SETTLING  # until the worker's first step says
-        self._launch(found.mission, found.log, segments(found.plan), paused=found.paused)
+        self._abort.clear()
+        self._wake.clear()
+        if found.paused:
+            self._paused.set()
+        self._launch(found.mission, found.log, segments(found.plan))
         self.event(
             "info",
             f"resuming mission {found.mission} at scan "
@@ -226,6 +259,8 @@ class MissionService:
             for step in log.steps():
                 if step.status in ("done", "failed", "skipped"):
                     continue
+                if self._wake.is_set():  # aborted while planning: not one route sent
+                    raise Aborted
                 self.current = step.scan_id
                 tag = f"scan {step.scan_id} (location {step.cand_id})"
                 if step.status == "scanning":
@@ -233,6 +268,8 @@ class MissionService:
                     if sv.found_on_scanner(step):
                         self.event("info", f"{tag}: done")
                         continue
+                    # whatever the scanner holds for it is not taken after another restart
+                    log.update(step.idx, status="driving")
                 self._visit(step.idx, by_cand[step.cand_id], tag)
             home = [s for s in segs if s.cand_id is None]
             if self.cfg.return_to_origin and home:
@@ -288,12 +325,16 @@ class MissionService:
 
     # --- registration at the end (see services/mission/registration.py for why here) ---
     def _register(self) -> None:
-        assert self.log is not None
-        run_dir = self.log.path.parent
+        log, mission = self.log, self.mission
+        assert log is not None
+        run_dir = log.path.parent
 
         def done(level: str, text: str) -> None:
-            self.detail = text
-            self.event(level, text)
+            # the next mission may have started meanwhile: the outcome goes to this
+            # one's log and events, and to the state's detail only while it is current
+            if self.mission == mission:
+                self.detail = text
+            self.event(level, text, log, mission)
 
         job = RegistrationJob(run_dir, done, self.ctx.manifest)
         try:
@@ -301,7 +342,7 @@ class MissionService:
         except OSError as exc:
             self.event("error", f"registration not started: {exc}")
             return
-        self._registration = job
+        self._registrations.append(job)
         self.detail = REGISTERING
         self.event("info", f"{REGISTERING} the scans: log in {job.log_path}")
 
@@ -325,8 +366,8 @@ class MissionService:
         self._wake.set()
         if self._worker is not None:
             self._worker.join(timeout=2.0)
-        if self._registration is not None:
-            self._registration.stop()
+        for job in self._registrations:
+            job.stop()
         if self.log is not None:
             self.log.close()
 

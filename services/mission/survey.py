@@ -35,7 +35,7 @@ from common.messages.nav import (
 from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
 from common.missionlog import Step
 from common.service import Context
-from common.transport import Latest, RpcError, RpcTimeout
+from common.transport import Bus, Latest, RpcError, RpcTimeout
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
@@ -51,6 +51,19 @@ class Aborted(Exception):
     """The operator aborted, or the service is stopping."""
 
 
+class Feeds:
+    """What a survey reads from the bus, subscribed once per service (a subscriber per
+    survey would add four threads for every mission the service ever runs): the newest
+    pose, route progress and scanner status, and each pose handed to ``on_pose``."""
+
+    def __init__(self, bus: Bus) -> None:
+        self.pose: Latest[PoseEstimate] = bus.latest(keys.NAV_POSE)
+        self.progress: Latest[NavProgress] = bus.latest(keys.NAV_PROGRESS)
+        self.scanner: Latest[ScannerStatus] = bus.latest(keys.SCANNER_STATUS)
+        self.on_pose: Callable[[PoseEstimate], None] = lambda _p: None
+        bus.subscribe(keys.NAV_POSE, lambda p: self.on_pose(p))
+
+
 class Survey:
     """Runs one mission's steps. ``wake`` is set on abort and on stop; ``abort`` and
     ``paused`` are the operator's; ``event(level, text)`` reports."""
@@ -59,6 +72,7 @@ class Survey:
         self,
         ctx: Context,
         cfg: MissionConfig,
+        feeds: Feeds,
         log: MissionLog,
         mission: str,
         event: Callable[[str, str], None],
@@ -69,15 +83,12 @@ class Survey:
         self.ctx, self.cfg, self.log, self.event = ctx, cfg, log, event
         self.mission = mission
         self.wake, self.abort, self.paused = wake, abort, paused
-        bus = ctx.bus
-        self.pose: Latest[PoseEstimate] = bus.latest(keys.NAV_POSE)
-        self.progress: Latest[NavProgress] = bus.latest(keys.NAV_PROGRESS)
-        self.scanner: Latest[ScannerStatus] = bus.latest(keys.SCANNER_STATUS)
+        self.pose, self.progress, self.scanner = feeds.pose, feeds.progress, feeds.scanner
         self._lock = threading.Lock()
         self._collect: list[PoseEstimate] | None = None
         self._last_pose: PoseEstimate | None = None
         self.distance = 0.0  # metres driven since this survey (or its resumption) began
-        bus.subscribe(keys.NAV_POSE, self._on_pose)
+        feeds.on_pose = self._on_pose  # the previous survey, ended, hears no more
         self.detail = ""
         self._routes = 0
 
@@ -288,8 +299,8 @@ class Survey:
             return not self._record(step, st, [p])
         with self._lock:  # the pose over the rest of the scan
             self._collect = [p]
-        try:
-            return not self._await_scan(step)
+        try:  # only statuses the scanner stamped after the one just seen
+            return not self._await_scan(step, st.stamp_ns)
         finally:
             with self._lock:
                 self._collect = None
@@ -310,19 +321,27 @@ class Survey:
             self.wait(2.0)
             return f"start failed: {exc}"
         try:
-            return self._await_scan(step, took.stamp_ns)
+            why = self._await_scan(step, took.stamp_ns)
         finally:
             with self._lock:
                 self._collect = None
+        if why:
+            # no longer "scanning": a mission restarted now must not take this
+            # attempt's scan from the scanner (its DONE may be one rejected here, taken
+            # off the plan or while moving); it positions and scans again
+            self.log.update(step.idx, status="driving")
+        return why
 
-    def _await_scan(self, step: Step, since_ns: int = -1) -> str:
-        """Wait for ``step``'s scan to end and record it. ``since_ns``: the scanner's
-        own stamp of its reply to this attempt's StartScan; only statuses it stamped
-        later speak of this attempt. The scanner republishes its state every tick, so
-        the previous attempt's DONE (same scan id) keeps fresh stamps until the start
-        is handled, and the mission's clock is no judge of them: under load two
-        processes' sim clocks differ by seconds (a retried scan was once recorded from
-        such a DONE while the real one was taken on the drive to the next location)."""
+    def _await_scan(self, step: Step, since_ns: int) -> str:
+        """Wait for ``step``'s scan to end and record it. ``since_ns``: a stamp of the
+        scanner's own clock (its reply to this attempt's StartScan, or a status of the
+        scan already seen); only statuses it stamped later speak of this attempt. The
+        scanner republishes its state every tick, so the previous attempt's DONE (same
+        scan id) keeps fresh stamps until the start is handled, and the mission's clock
+        is no judge of them: under load two processes' sim clocks differ by seconds,
+        and in the field the scanner's computer keeps its own time (a retried scan was
+        once recorded from such a DONE while the real one was taken on the drive to the
+        next location)."""
         t0 = seen = self.now()
         while True:
             paused = self.wait(0.2)
@@ -334,9 +353,10 @@ class Survey:
             st = self.scanner.get()
             # a status from before this attempt (a retry follows an error for the
             # same scan id) says nothing about it
-            stale = st is not None and (st.stamp_ns < t0 or st.stamp_ns <= since_ns)
+            stale = st is not None and st.stamp_ns <= since_ns
             if st is None or stale or st.scan_id != step.scan_id:
                 if (now - seen) / NS > self.cfg.scanner_lost_s:
+                    self._stop_scan()  # a device still scanning would refuse the retry
                     lost = self.cfg.scanner_lost_s
                     return f"scanner lost the scan (no status for it in {lost:.0f} s)"
                 continue

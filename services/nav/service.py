@@ -232,7 +232,16 @@ class NavService:
                             reason=f"route {rid} is not being followed "
                             f"(now: {self.follower.route_id or 'none'}, {self.follower.state})",
                         )
-                case CancelRoute():
+                case CancelRoute(route_id=rid):
+                    # a cancel names its route: one that arrives late (it waited behind
+                    # a stalled tick) must not end the route sent after it
+                    if rid and rid != self.follower.route_id:
+                        return NavReply(
+                            stamp_ns=now,
+                            accepted=False,
+                            reason=f"route {rid} is not being followed "
+                            f"(now: {self.follower.route_id or 'none'})",
+                        )
                     self.follower.cancel()
                     self.ctx.log.info("route %s cancelled", self.follower.route_id)
         return NavReply(stamp_ns=now, accepted=True)
@@ -292,6 +301,12 @@ class NavService:
                 if cmd.v or cmd.w:
                     self._moving_until = t
                 route_id, legs = self.follower.route_id, len(self.follower.legs)
+                # sent under the lock: a route abandoned by another thread (the mission
+                # gone) is never followed by this tick's older command
+                if active or was_active:
+                    self.cmd_pub.put(
+                        Twist(stamp_ns=now, frame_id="base_link", linear_x=cmd.v, angular_z=cmd.w)
+                    )
             self.pose_pub.put(
                 PoseEstimate(
                     stamp_ns=now,
@@ -309,10 +324,6 @@ class NavService:
                     tilted=tilt is not None,
                 )
             )
-            if active or was_active:
-                self.cmd_pub.put(
-                    Twist(stamp_ns=now, frame_id="base_link", linear_x=cmd.v, angular_z=cmd.w)
-                )
             was_active = active
             if route_id:
                 self.progress_pub.put(

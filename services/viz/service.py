@@ -133,7 +133,8 @@ class VizService:
         try:
             self.out.start()
             for rec in self.out.streams():
-                self.out.log_static(rec, self.static.values())
+                # a copy: the worker thread adds the field's cells meanwhile
+                self.out.log_static(rec, list(self.static.values()))
             while not stop.wait(1.0 / self.cfg.rate_hz):
                 self.tick()
         finally:
@@ -240,7 +241,8 @@ class VizService:
         if s.in_progress and self.out.open_mission(s.mission):
             rec = self.out.mission_stream
             if rec is not None:
-                self.out.log_static(rec, self.static.values())
+                # a copy: the worker thread adds the field's cells meanwhile
+                self.out.log_static(rec, list(self.static.values()))
         self.out.log(s.stamp_ns, scene.state_entries(self.state, s))
         self.state = s
 

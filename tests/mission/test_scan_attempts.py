@@ -7,9 +7,12 @@ just rejected. The mission's clock cannot judge such a status: two processes' cl
 differ by seconds under load. Once, a retried scan was recorded from that DONE while the
 real scan was taken on the drive to the next location, 4 m away.
 
-Here a scanner on the bus runs its clock 5 s ahead of the mission's and, for a second
-after answering, keeps delivering what it stamped before the answer: the previous
-attempt's DONE. The retry must wait for its own DONE (another file).
+Here a scanner on the bus runs its clock 5 s ahead of the mission's (or, as a Jetson
+whose clock was never set would, a minute behind it) and, for a second after
+answering, keeps delivering what it stamped before the answer: the previous attempt's
+DONE. The retry must wait for its own DONE (another file). And an attempt that is not
+recorded (the pose over it was off) leaves its step out of ``scanning``: a mission
+restarted then must not take that scan from the scanner.
 """
 
 from __future__ import annotations
@@ -27,27 +30,36 @@ from common import keys
 from common.clock import WallClock
 from common.messages.nav import PoseEstimate
 from common.messages.scan import ScannerReply, ScannerState, ScannerStatus, StartScan
+from common.missionlog import Step
 from common.service import Context
 from common.transport import Bus
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
-from services.mission.survey import Survey
+from services.mission.survey import Feeds, Survey
 from tests.conftest import client
 
 NS = 1_000_000_000
-AHEAD_NS = 5 * NS  # the scanner's clock against the mission's
 X, Y = 10.5, 2.0  # the planned location
 
 
-class AheadScanner:
-    """A scanner whose clock runs ``AHEAD_NS`` ahead, left DONE by a first attempt at
+class OffsetScanner:
+    """A scanner whose clock runs ``offset_ns`` ahead, left DONE by a first attempt at
     scan 1 (``first.e57``). A StartScan is answered at once; for ``late_s`` after the
     answer the statuses delivered are those stamped before it (the old DONE), then
     it scans for ``scan_s`` and ends DONE with ``second.e57``. It also publishes the
-    navigation's pose, localized at the planned location, as a standing robot's."""
+    navigation's pose, localized ``off_m`` east of the planned location, as a standing
+    robot's."""
 
-    def __init__(self, bus: Bus, late_s: float = 1.0, scan_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        offset_ns: int,
+        off_m: float = 0.0,
+        late_s: float = 1.0,
+        scan_s: float = 1.0,
+    ) -> None:
         self.bus, self.late_s, self.scan_s = bus, late_s, scan_s
+        self.offset_ns, self.off_m = offset_ns, off_m
         self.replied_ns: int | None = None  # the scanner's stamp of its answer
         self.replied_wall = 0.0
         self.stop = threading.Event()
@@ -62,7 +74,7 @@ class AheadScanner:
         self._thread.join()
 
     def now(self) -> int:
-        return time.time_ns() + AHEAD_NS
+        return time.time_ns() + self.offset_ns
 
     def _command(self, cmd: object) -> ScannerReply:
         assert isinstance(cmd, StartScan), cmd
@@ -89,7 +101,8 @@ class AheadScanner:
     def _run(self) -> None:
         while not self.stop.wait(0.05):
             self._status.put(self.status())
-            self._pose.put(PoseEstimate(x=X, y=Y, yaw=0.0, localized=True, stamp_ns=self.now()))
+            pose = PoseEstimate(x=X + self.off_m, y=Y, yaw=0.0, localized=True)
+            self._pose.put(msgspec.structs.replace(pose, stamp_ns=self.now()))
 
 
 @pytest.fixture
@@ -98,31 +111,45 @@ def scanner_bus(router_endpoint: str) -> Iterator[Bus]:
         yield bus
 
 
-def test_a_retried_scan_waits_for_its_own_done(
-    client_bus: Bus, scanner_bus: Bus, tmp_path: Path
-) -> None:
-    scanner = AheadScanner(scanner_bus)
+def retry(bus: Bus, tmp_path: Path, scanner: OffsetScanner) -> tuple[str, Step, list[str]]:
+    """The retry of scan 1 at (X, Y): why it failed ("" if not) and its step after."""
     log = MissionLog(tmp_path / "mission.db")
     log.create("m", "tiny", 0, "{}", [(1, 0, X, Y, 0.0)])
     # the first attempt ended without a usable pose: this is the retry
     log.update(0, status="scanning", attempts=1)
-    events: list[tuple[str, str]] = []
-    ctx = Context("mission", "test", client_bus, WallClock(), logging.getLogger("t"), tmp_path)
+    events: list[str] = []
+    ctx = Context("mission", "test", bus, WallClock(), logging.getLogger("t"), tmp_path)
     wake, abort, paused = threading.Event(), threading.Event(), threading.Event()
-    survey = Survey(
-        ctx, MissionConfig(), log, "m", lambda lv, t: events.append((lv, t)), wake, abort, paused
-    )
+    report = lambda lv, t: events.append(f"{lv}: {t}")  # noqa: E731
+    survey = Survey(ctx, MissionConfig(), Feeds(bus), log, "m", report, wake, abort, paused)
     try:
         seen = survey.scanner.wait_for(lambda s: s.file == "first.e57", timeout=10)
         assert seen is not None, "the scanner's status never reached the mission"
-        step = log.steps()[0]
-        why = survey.scan(step, MissionConfig().profile)
-        recorded = log.steps()[0]
+        why = survey.scan(log.steps()[0], MissionConfig().profile)
+        return why, log.steps()[0], events
     finally:
         scanner.close()
         wake.set()
         log.close()
+
+
+@pytest.mark.parametrize("offset_s", [5, -60], ids=["scanner-5s-ahead", "scanner-1min-behind"])
+def test_a_retried_scan_waits_for_its_own_done(
+    client_bus: Bus, scanner_bus: Bus, tmp_path: Path, offset_s: int
+) -> None:
+    scanner = OffsetScanner(scanner_bus, offset_s * NS)
+    why, recorded, events = retry(client_bus, tmp_path, scanner)
     assert why == "", (why, events)
     assert recorded.status == "done"
     assert recorded.file == "second.e57", "recorded from the previous attempt's DONE"
     assert scanner.replied_ns is not None
+
+
+def test_a_scan_taken_off_the_plan_is_not_left_for_a_restart_to_take(
+    client_bus: Bus, scanner_bus: Bus, tmp_path: Path
+) -> None:
+    scanner = OffsetScanner(scanner_bus, 0, off_m=0.2)
+    why, step, events = retry(client_bus, tmp_path, scanner)
+    assert "not recorded as done" in why, (why, events)
+    # "scanning" would let a restarted mission record the scanner's DONE of it
+    assert step.status == "driving", step
