@@ -13,6 +13,7 @@ from common.service import Context
 from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
 from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
+from services.gnss.pairing import EpochPairer
 from services.gnss.receiver import Receiver, open_receiver
 from services.gnss.solution import FixBuilder, heading
 
@@ -32,19 +33,12 @@ class GnssService:
         self.splitters = {rx.antenna: LineSplitter() for rx in self.receivers}
         for antenna, sp in self.splitters.items():
             ctx.bus.report(f"antenna{antenna}_garbage_bytes", _count(sp))
-        self._lock = threading.Lock()
-        self._latest: dict[int, tuple[float, NavSatFix]] = {}
+        self.pairs = EpochPairer()
 
     def _on_fix(self, epoch: float, fix: NavSatFix) -> None:
         self.fix_pubs[fix.antenna].put(fix)
-        with self._lock:
-            self._latest[fix.antenna] = (epoch, fix)
-            pair = [self._latest.get(1), self._latest.get(2)]
-            if pair[0] is None or pair[1] is None or pair[0][0] != pair[1][0]:
-                return
-            f1, f2 = pair[0][1], pair[1][1]
-            del self._latest[1], self._latest[2]
-        self.heading_pub.put(heading(f1, f2, self.frame, self.compass))
+        if (pair := self.pairs.add(epoch, fix)) is not None:
+            self.heading_pub.put(heading(*pair, self.frame, self.compass))
 
     def _read(self, rx: Receiver, stop: threading.Event) -> None:
         splitter = self.splitters[rx.antenna]

@@ -39,6 +39,9 @@ from services.viz import clouds, scene
 from services.viz.config import VizConfig
 from services.viz.outputs import Outputs
 
+# a robot slower than this (m/s, rad/s) stands where its last scan was taken
+STILL = 0.01
+
 # streams whose newest message is all the dashboard needs
 LATEST: dict[str, Topic[Any]] = {
     "pose": keys.NAV_POSE,
@@ -93,6 +96,7 @@ class VizService:
         self._events: collections.deque[MissionEvent] = collections.deque(maxlen=1000)
         self._done: collections.deque[ScannerStatus] = collections.deque(maxlen=100)
         self._done_seen: set[tuple[int, str]] = set()
+        self._scan_poses: dict[int, PoseEstimate] = {}
         self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=64)
         self.superseded = 0  # messages replaced by a newer one before being drawn
         for name, topic in LATEST.items():
@@ -204,6 +208,8 @@ class VizService:
         elif name == "scanner":
             log(m.stamp_ns, scene.scanner_entries(self.scanner, m))
             self.scanner = m
+            if m.state == ScannerState.SCANNING and self._last_pose is not None:
+                self._scan_poses[m.scan_id] = self._last_pose  # where it is being taken
 
     def _set_static(self, entries: list[scene.Entry]) -> None:
         for e in entries:
@@ -247,9 +253,18 @@ class VizService:
         self.state = s
 
     def _queue_scan(self, st: ScannerStatus) -> None:
-        pose = self._last_pose
+        """Draw a finished scan where it was taken: the pose seen while it was being
+        taken, else (this dashboard started during or after it: the scanner repeats
+        its DONE until the next scan) the robot's if it still stands there."""
+        pose = self._scan_poses.pop(st.scan_id, None)
+        last = self._last_pose
+        if pose is None and last is not None and abs(last.v) < STILL and abs(last.w) < STILL:
+            pose = last
         if pose is None:
-            raise ValueError(f"scan {st.scan_id} finished before any pose arrived")
+            raise ValueError(
+                f"scan {st.scan_id} was not seen being taken and the robot has moved on: "
+                "not drawn (its place is in the mission log)"
+            )
         mount = self.ctx.robot.scanner
 
         def job() -> None:

@@ -13,6 +13,7 @@ from common.clock import WallClock
 from common.messages.base import LaserScan
 from common.messages.core import Array
 from common.messages.nav import PoseEstimate
+from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
 from common.transport import Bus
 from services.viz.config import VizConfig
@@ -60,3 +61,33 @@ def test_bad_messages_are_dropped_and_the_rest_is_recorded(client_bus: Bus, tmp_
     paths = rrd.entity_paths(out)
     assert {"/robot/estimate", "/robot/trail/0000", "/robot/estimate/body"} <= paths
     assert "/robot/estimate/lidar" not in paths
+
+
+def test_a_finished_scan_is_drawn_where_it_was_taken_not_where_the_robot_is(
+    client_bus: Bus, tmp_path: Path
+) -> None:
+    """The scanner repeats its DONE until the next scan: a dashboard (re)started while
+    the robot drives on must not draw that scan at the moving robot."""
+    ctx = Context("viz", "test", client_bus, WallClock(), logging.getLogger("viz"), tmp_path)
+    svc = VizService(ctx, VizConfig(save=str(tmp_path / "live.rrd")))
+    at_2 = PoseEstimate(stamp_ns=1, x=2.0, y=1.0, yaw=0.0)
+    driving = PoseEstimate(stamp_ns=2, x=5.0, y=1.0, yaw=0.0, v=0.5)
+
+    def done(scan_id: int) -> ScannerStatus:
+        return ScannerStatus(state=ScannerState.DONE, scan_id=scan_id, file=f"s{scan_id}.e57")
+
+    # scan 1 finished before this dashboard started; the robot is driving on: not drawn
+    svc._put("pose", driving)
+    svc._put("scanner", done(1))
+    svc.tick()
+    assert "scan" in svc.failed and svc._jobs.empty()
+    # scan 2 seen being taken at x = 2, finished after the robot moved: drawn, from x = 2
+    svc.failed.clear()
+    svc._put("pose", at_2)
+    svc._put("scanner", ScannerStatus(state=ScannerState.SCANNING, scan_id=2, progress=0.5))
+    svc.tick()
+    svc._put("pose", driving)
+    svc._put("scanner", done(2))
+    svc.tick()
+    assert "scan" not in svc.failed and svc._jobs.qsize() == 1
+    assert 2 not in svc._scan_poses
