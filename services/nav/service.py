@@ -226,25 +226,21 @@ class NavService:
                     )
                 case RenewRoute(route_id=rid, lease_s=lease):
                     if not self.follower.renew(rid, t + lease):
-                        return NavReply(
-                            stamp_ns=now,
-                            accepted=False,
-                            reason=f"route {rid} is not being followed "
-                            f"(now: {self.follower.route_id or 'none'}, {self.follower.state})",
-                        )
+                        return self._not_followed(rid, now)
                 case CancelRoute(route_id=rid):
                     # a cancel names its route: one that arrives late (it waited behind
                     # a stalled tick) must not end the route sent after it
                     if rid and rid != self.follower.route_id:
-                        return NavReply(
-                            stamp_ns=now,
-                            accepted=False,
-                            reason=f"route {rid} is not being followed "
-                            f"(now: {self.follower.route_id or 'none'})",
-                        )
+                        return self._not_followed(rid, now)
                     self.follower.cancel()
                     self.ctx.log.info("route %s cancelled", self.follower.route_id)
         return NavReply(stamp_ns=now, accepted=True)
+
+    def _not_followed(self, rid: str, now: int) -> NavReply:
+        """The refusal of a command naming a route other than the one followed."""
+        f = self.follower
+        why = f"route {rid} is not being followed (now: {f.route_id or 'none'}, {f.state})"
+        return NavReply(stamp_ns=now, accepted=False, reason=why)
 
     def _off_field(self, legs: list[Leg]) -> str:
         """Why the route is refused ("" if it is not): a leg ending more than
