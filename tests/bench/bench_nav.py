@@ -32,6 +32,14 @@ from phenorover.eval.results import Bench, Goal
 
 REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = ("border", "serpentine", "stationary")
+# what would close a missed stop depends on where the error is, which the run shows:
+# the estimate itself off the plan (the robot was placed, then moved) or the estimate
+# on the plan and off the truth (what the estimate does not know)
+TILT = (
+    "the IMU's bias known better before the stop: this experiment takes no scan, so "
+    "only the turns in place on the way level it (a few hundredths of a degree each on "
+    "the simulated ground); and the fix's noise under the crop averaged longer on arrival"
+)
 TURN = (
     "a place trim after the final turn: the fine phase places the robot on the leg's "
     "heading and then turns in place to the planned heading, and the turn moves a skid "
@@ -49,7 +57,8 @@ GOALS = {
     "border_xte": Goal("<=", 2.0, CORNERS),
     "border_below": Goal(">=", 90.0, CORNERS),
     "serpentine_xte": Goal("<=", 3.0, CORNERS),
-    "stop": Goal("<=", 0.5, TURN),
+    "stop": Goal("<=", 0.5, TILT),
+    "stop_placed_off": Goal("<=", 0.5, TURN),
     "heading": Goal(
         "<=",
         0.1,
@@ -58,7 +67,9 @@ GOALS = {
         "chase noise; settle until the filter's heading sigma is below the tolerance",
     ),
 }
-BY_CONSTRUCTION = "no target: the fine phase places the estimate to 3 mm, then turns"
+BY_CONSTRUCTION = (
+    "no target: the fine phase places the estimate to its 3 mm tolerance, before its final turn"
+)
 
 
 def run_experiment(
@@ -123,11 +134,12 @@ def record(bench: Bench, exp: str, s: dict[str, Any] | None, why: str) -> None:
         fig("distance driven, the true path", get("driven_true_m"), "m")
         fig("route length, planned", get("planned_route_m"), "m", note="planned, not measured")
         return
+    placed_off = (get("paper_estimate_to_planned_cm") or 0.0) > GOALS["stop"].value
     fig(
         "true stop against the planned point, mean distance over the hold",
         get("true_stop_to_planned_cm"),
         "cm",
-        goal=GOALS["stop"],
+        goal=GOALS["stop_placed_off" if placed_off else "stop"],
         headline=True,
     )
     fig(
