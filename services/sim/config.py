@@ -37,6 +37,11 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``faults``: device faults scheduled in sim time, ``[[services.sim.faults]]`` entries
     (see :mod:`services.sim.faults` and docs/faults.md); simulation only, the truth
     is never touched.
+    ``nice``: how far the simulator yields the CPU to the services it feeds (a Unix
+    nice increment, 0: not at all). On a machine too busy for ``real_time_factor``
+    the world then slows down, as the services are not able to in the field: at the
+    same priority it kept its pace and the services fell seconds of sim time behind
+    their own sensors, for good (a backlog a saturated machine never drains).
     """
 
     real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1000)] = 1.0
@@ -55,6 +60,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     snapshot_s: Annotated[float, msgspec.Meta(ge=0, le=3600)] = 0.5
     scan_dir: str = ""
     faults: list[Fault] = msgspec.field(default_factory=list)
+    nice: Annotated[int, msgspec.Meta(ge=0, le=19)] = 10
 
 
 class SimCli:

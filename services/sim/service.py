@@ -12,6 +12,7 @@ on from it. Rendered scans go only under the scan folder (see
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -291,4 +292,9 @@ class SimService:
 
 
 def build(ctx: Context, cfg: SimConfig) -> SimService:
+    if cfg.nice:
+        try:
+            os.nice(cfg.nice)
+        except OSError as exc:  # not allowed here: the world keeps the services' pace
+            ctx.log.warning("cannot lower the simulator's priority (nice %d): %s", cfg.nice, exc)
     return SimService(ctx, cfg)

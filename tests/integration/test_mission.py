@@ -324,6 +324,14 @@ def test_services_killed_mid_survey_are_restarted_and_the_survey_completes(
     nav on the way to scan 2, the mission in the middle of scan 2, the scanner in the
     middle of scan 3."""
     d = deployment
+    # the simulated world yields the CPU to the services: a restart's seconds of
+    # start-up on a saturated machine once left nav seconds of sim time behind its
+    # sensors for the rest of the survey
+    pids = {a.service: a.pid for a in wait_alive(d.session, {"sim", "nav"}, 10).seen}
+    nice = os.getpriority(os.PRIO_PROCESS, pids["sim"]) - os.getpriority(
+        os.PRIO_PROCESS, pids["nav"]
+    )
+    assert nice == 10
     truth: list[TruthPose] = []
     d.bus.subscribe(keys.SIM_TRUTH, truth.append)
     progress = d.bus.latest(keys.NAV_PROGRESS)

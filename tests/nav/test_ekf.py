@@ -115,7 +115,7 @@ def test_a_filter_that_drifted_recovers_instead_of_rejecting_forever() -> None:
     loc._set_x(x)
     p = loc.P
     p[2, 2] = math.radians(0.2) ** 2  # and it is sure of itself
-    loc.kf.P = p
+    loc.P = p
     truth = wrap_angle(x[2] - math.radians(8.0))
     t = loc.t or 0.0
     for k in range(1, 60):  # odometry keeps the turn rate pinned, as on the robot
@@ -306,7 +306,7 @@ def test_a_non_finite_state_resets_to_not_localized_and_the_next_fixes_recover()
     loc, t = converged()
     p = loc.P
     p[0, 0] = math.nan  # what an overflow somewhere once did, for good
-    loc.kf.P = p
+    loc.P = p
     loc.predict(t + 0.02)
     assert loc.counters.resets_by == {"nonfinite": 1}
     assert not loc.initialized and not loc.localized()
@@ -344,9 +344,10 @@ def test_stamps_from_another_clock_are_refused_and_the_callers_clock_wins() -> N
 
 
 def test_absurd_fixes_before_initialisation_never_leave_an_implausible_state() -> None:
-    """Before a heading nothing is gated, and a late fix pulls on the turn rate
-    through the lever arm: fixes thousands of km apart once drove it past anything
-    a subscriber would decode. Such a state resets the filter instead."""
+    """Before a heading nothing is gated, and a late fix fused through the lever arm
+    pulled on the turn rate: fixes thousands of km apart once drove it past anything
+    a subscriber would decode. Before a heading a fix now only sets the position;
+    and a state beyond what the robot can be resets the filter whatever reached it."""
     loc = Localizer(EkfConfig())
     rng = np.random.default_rng(4)
     for k in range(500):
@@ -356,4 +357,32 @@ def test_absurd_fixes_before_initialisation_never_leave_an_implausible_state() -
         x = loc.x
         assert abs(x[3]) <= 10.0 and abs(x[4]) <= 20.0 and max(abs(x[0]), abs(x[1])) <= 1e7
         assert_finite(loc)
-    assert loc.counters.resets_by.get("implausible", 0) >= 1
+    assert abs(loc.x[3]) < 0.1 and abs(loc.x[4]) < 0.1  # the velocities never pulled
+    x = loc.x
+    x[3] = 50.0
+    loc._set_x(x)
+    assert not loc._check()
+    assert loc.counters.resets_by.get("implausible", 0) == 1 and not loc.initialized
+
+
+@pytest.mark.parametrize("yaw", [0.0, 1.6, math.pi])
+def test_a_filter_started_facing_any_way_is_localized_where_the_robot_stands(yaw: float) -> None:
+    """A nav restarted mid-field, the robot standing: both antennas' fixes arrive
+    before the first compass heading. The lever arms' direction is unknown until
+    then; the position is taken from the fixes once the heading is known, not fitted
+    through a guessed heading (that once left it 0.97 m off, every later fix gated)."""
+    rng = np.random.default_rng(1)
+    loc = Localizer(EkfConfig())
+    x0, y0 = 12.0, 3.0
+    for k in range(100):  # 10 s at 10 Hz; the compass's first heading after 1 s
+        t = 0.1 * k
+        loc.update_odometry(t, 0.0, 0.0, 1e-4, 1e-4, still=True)
+        for lever in (LEVER1, LEVER2):
+            z = antenna(x0, y0, yaw, lever) + rng.normal(0, SIG, 2)
+            loc.update_antenna(t, z, np.eye(2) * SIG**2, lever)
+        if t >= 1.0:
+            loc.update_heading(t, wrap_angle(yaw + rng.normal(0, 0.0104)), 0.0104)
+        if t >= 2.0:
+            assert math.hypot(loc.x[0] - x0, loc.x[1] - y0) < 0.02, t
+            assert loc.localized(), t
+    assert loc.counters.resets_by.get("relocalized", 0) == 0
