@@ -28,6 +28,10 @@ from services.nav.follower_config import FollowerConfig
 class Fine:
     """The fine phase's budget of moves and its timers, for one route."""
 
+    #: creeps and as many heading trims a side trim adds to the budget: its detour's
+    #: creep, the creep back along the line, one more of either
+    TRIM_MOVES = 3
+
     def __init__(self, cfg: FollowerConfig) -> None:
         self.cfg = cfg
         self.moves = 0  # creeps along the heading, re-approaches included
@@ -85,11 +89,7 @@ class Fine:
         is beyond the tolerance. Its detour points forwards when the goal is ahead,
         backwards otherwise, so the creep along it also closes the distance."""
         c = self.cfg
-        if (
-            math.hypot(side, ahead) <= c.fine_tolerance_m
-            or self.side_trims >= c.side_trims
-            or self.moves >= c.fine_moves
-        ):
+        if math.hypot(side, ahead) <= c.fine_tolerance_m or self.side_trims >= c.side_trims:
             return False
         self.side_trims += 1
         self.placed = False
@@ -123,15 +123,16 @@ class Fine:
             return 0.0, 0.0
         # position and heading each have their own budget of moves: a trim of the
         # heading is cheap and must not go short because the position took long
-        trim = (
-            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < c.fine_moves
-        )
+        # each side trim brings its own budget: started, it is finished (a trim cut
+        # short leaves the robot on its detour, centimetres off)
+        limit = c.fine_moves + self.TRIM_MOVES * self.side_trims
+        trim = abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < limit
         if trim and self.turned and not self.detour:
             # turned to the planned heading, the heading comes first: a creep along
             # a heading a degree off moves the robot sideways by 1.7 % of it
             self._creep = ("w", math.copysign(1.0, -yaw_err))
             self.turns += 1
-        elif abs(rem) > c.fine_tolerance_m and self.moves < c.fine_moves:
+        elif abs(rem) > c.fine_tolerance_m and self.moves < limit:
             self._creep = ("v", math.copysign(1.0, rem))
             self.moves += 1
         elif self.detour:
