@@ -9,13 +9,6 @@ skid-steer robot creeps only along its heading, so once turned to another planne
 heading it could no longer correct its place along the leg. A sideways offset, which
 no creep removes, is the follower's to drive out by backing up (:meth:`Fine.reapproach`
 says whether the budget allows one).
-
-The turn to the planned heading then moves the robot: a skid steer turns about a
-centre that wanders centimetres from base_link, so a 90 deg turn shifts it by about
-that much, in any direction. :meth:`Fine.trim_place` then places it again on the
-planned heading: along it by a creep; across it by a *side trim*, a detour of
-``side_trim_deg`` (a few degrees, which shift the robot by millimetres) held while
-creeping to the line through the goal along the planned heading, then back.
 """
 
 from __future__ import annotations
@@ -28,19 +21,12 @@ from services.nav.follower_config import FollowerConfig
 class Fine:
     """The fine phase's budget of moves and its timers, for one route."""
 
-    #: creeps and as many heading trims a side trim adds to the budget: its detour's
-    #: creep, the creep back along the line, one more of either
-    TRIM_MOVES = 3
-
     def __init__(self, cfg: FollowerConfig) -> None:
         self.cfg = cfg
         self.moves = 0  # creeps along the heading, re-approaches included
         self.turns = 0  # heading trims
         self.reapproaches = 0
         self.placed = False  # the place is done: the heading follows
-        self.turned = False  # the planned heading was sought once: placed on it since
-        self.detour = 0.0  # a side trim's offset from the planned heading (rad)
-        self.side_trims = 0
         self._creep: tuple[str, float] | None = None  # ("v" | "w", sign) while creeping
         self._still_since = 0.0
         self._settle = cfg.fine_settle_s  # how long to stand before the next check
@@ -77,33 +63,7 @@ class Fine:
         return ok
 
     def summary(self) -> str:
-        return (
-            f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches, "
-            f"{self.side_trims} side trims"
-        )
-
-    def trim_place(self, side: float, ahead: float) -> bool:
-        """Placed and turned, the goal ``side`` metres to the left of the planned
-        heading and ``ahead`` along it: whether to place again (off by more than the
-        tolerance, budget left), with a side trim when the offset across the heading
-        is beyond the tolerance. Its detour points forwards when the goal is ahead,
-        backwards otherwise, so the creep along it also closes the distance."""
-        c = self.cfg
-        if math.hypot(side, ahead) <= c.fine_tolerance_m or self.side_trims >= c.side_trims:
-            return False
-        self.side_trims += 1
-        self.placed = False
-        if abs(side) > c.fine_tolerance_m:
-            self.detour = math.copysign(
-                math.radians(c.side_trim_deg), side if ahead >= 0 else -side
-            )
-        return True
-
-    @staticmethod
-    def detour_distance(side: float, off_heading: float) -> float:
-        """How far to creep at ``off_heading`` (rad) from the planned heading to reach
-        the line through the goal along it, the goal ``side`` metres to its left."""
-        return side / math.sin(off_heading) if abs(off_heading) > 1e-3 else 0.0
+        return f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches"
 
     def step(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
         """One step at the goal, ``rem`` metres short of it along the robot's heading
@@ -123,26 +83,15 @@ class Fine:
             return 0.0, 0.0
         # position and heading each have their own budget of moves: a trim of the
         # heading is cheap and must not go short because the position took long
-        # each side trim brings its own budget: started, it is finished (a trim cut
-        # short leaves the robot on its detour, centimetres off)
-        limit = c.fine_moves + self.TRIM_MOVES * self.side_trims
-        trim = abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < limit
-        if trim and self.turned and not self.detour:
-            # turned to the planned heading, the heading comes first: a creep along
-            # a heading a degree off moves the robot sideways by 1.7 % of it
-            self._creep = ("w", math.copysign(1.0, -yaw_err))
-            self.turns += 1
-        elif abs(rem) > c.fine_tolerance_m and self.moves < limit:
+        if abs(rem) > c.fine_tolerance_m and self.moves < c.fine_moves:
             self._creep = ("v", math.copysign(1.0, rem))
             self.moves += 1
-        elif self.detour:
-            # on the line through the goal: back to the planned heading, place along it
-            self.detour = 0.0
-            return 0.0, 0.0
         elif not self.placed:
-            self.placed = self.turned = True
+            self.placed = True
             return 0.0, 0.0
-        elif trim:
+        elif (
+            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < c.fine_moves
+        ):
             self._creep = ("w", math.copysign(1.0, -yaw_err))
             self.turns += 1
         else:

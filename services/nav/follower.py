@@ -230,10 +230,9 @@ class Follower:
             # planned heading it could no longer correct its place along the leg
             along = _leg_len(leg) > 0
             final = leg.final_yaw if leg.final_yaw is not None else heading if along else yaw
-            fine = self.fine
-            turned = fine.placed or fine.turned or not along
-            goal_yaw = final + fine.detour if turned else heading
+            goal_yaw = final if self.fine.placed or not along else heading
             ferr = wrap_angle(yaw - goal_yaw)
+            fine = self.fine
             if abs(ferr) > tol and not fine.creeping:
                 # a large turn (the leg's heading to another planned one) is done
                 # coarsely first; the fine phase then settles and trims it
@@ -249,21 +248,14 @@ class Follower:
                 self._backup_to = min(self.cfg.reapproach_m, _leg_len(leg))
                 self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
                 return out(0.0, 0.0, NavState.POSITIONING)
-            # the robot can only creep along its heading: the goal's offset that way,
-            # or on a side trim's detour the way to the line through it
-            gx, gy = leg.x1 - x, leg.y1 - y
-            ahead = gx * math.cos(yaw) + gy * math.sin(yaw)
-            side = gy * math.cos(final) - gx * math.sin(final)
-            if fine.detour:
-                ahead = fine.detour_distance(side, wrap_angle(yaw - final))
-            placed, detour = fine.placed, fine.detour
+            # the robot can only creep along its heading: the goal's offset that way
+            ahead = (leg.x1 - x) * math.cos(yaw) + (leg.y1 - y) * math.sin(yaw)
+            placed = fine.placed
             v, w = fine.step(t, ahead, ferr)
-            if fine.placed != placed or fine.detour != detour:
-                return out(0.0, 0.0, NavState.POSITIONING)  # a turn next
+            if fine.placed != placed:
+                return out(0.0, 0.0, NavState.POSITIONING)  # the heading's turn next
             if v or w or not fine.settled(t):
                 return out(v, w, NavState.POSITIONING)
-            if along and fine.trim_place(side, gx * math.cos(final) + gy * math.sin(final)):
-                return out(0.0, 0.0, NavState.POSITIONING)
             c = self._arrive(out, x, y, ferr)
             c.detail += f" ({fine.summary()})"
             return c

@@ -61,13 +61,6 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     reapproach_speed: Pos = 0.05
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
     reapproach_tolerance_m: Pos = 0.004
-    # after the turn to the planned heading (which shifts a skid steer by about its
-    # turning centre's offset, centimetres), place again: across the heading by at
-    # most this many side trims, each a detour this far off the heading (a few
-    # degrees shift the robot by millimetres, and cost a creep of about 12 times
-    # the offset: 2.5 cm takes 30 s each way)
-    side_trims: Annotated[int, msgspec.Meta(ge=0)] = 2
-    side_trim_deg: Annotated[float, msgspec.Meta(gt=0, le=45)] = 5.0
     # arrival is declared only within this distance of the route's end and this angle
     # of its planned heading; else the route fails: a scan must never be taken where
     # the robot merely stopped. The heading's is its own setting, not the in-place

@@ -41,12 +41,12 @@ TILT = (
     "the simulated ground); and the fix's noise under the crop averaged longer on arrival"
 )
 TURN = (
-    "a later last check: the fine phase places the estimate to 3 mm, 2 s after its "
-    "last creep, and the robot ends where it was placed, but over the hold the "
-    "estimate keeps averaging the crop's correlated fixes (2 s correlation, their noise "
-    "up to 9 times the open sky's) and moves by millimetres (compare the estimate "
-    "against the plan and against the truth below); settling longer before the last "
-    "check, or placing again during the hold, would follow it"
+    "a place trim after the final turn: the fine phase places the robot on the leg's "
+    "heading and then turns in place to the planned heading, and the turn moves a skid "
+    "steer's centre (the simulated turning centre wanders 3 cm) sideways to the new "
+    "heading, where no creep along it takes the robot back (compare the estimate "
+    "against the plan and against the truth below); turning a few degrees, creeping "
+    "and turning back would remove it"
 )
 CORNERS = (
     "a tracker that closes the corner turn's sideways shift faster (yaw-rate feedback, "
@@ -68,7 +68,7 @@ GOALS = {
     ),
 }
 BY_CONSTRUCTION = (
-    "no target: the fine phase places the estimate to its 3 mm tolerance on arrival"
+    "no target: the fine phase places the estimate to its 3 mm tolerance, before its final turn"
 )
 
 

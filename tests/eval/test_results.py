@@ -229,12 +229,12 @@ def test_the_stationary_headline_is_the_true_stop() -> None:
     assert lean.value == pytest.approx(math.hypot(2.0, 2.1))
 
 
-def test_a_stop_whose_estimate_ends_off_the_plan_blames_the_placing_not_the_tilt() -> None:
+def test_a_stop_placed_off_the_plan_blames_the_placing_not_the_estimate() -> None:
     b = Bench("bench_nav")
-    # the estimate itself 2.56 cm off the plan over the hold (0.3 cm off the truth)
+    # the estimate itself 2.56 cm off the plan (0.3 cm off the truth): placed, then moved
     bench_nav.record(b, "stationary", stationary_stats(2.81, 2.56), "")
     stop = next(f for f in b.figures if f.name.startswith("stationary: true stop"))
-    assert stop.verdict == "missed" and "last check" in stop.what_would_close_it
+    assert stop.verdict == "missed" and "final turn" in stop.what_would_close_it
 
 
 def test_a_failed_experiment_is_not_measured_and_fails_the_benchmark() -> None:

@@ -81,16 +81,10 @@ def test_no_motion_while_not_localized() -> None:
 
 
 def run_lagging(
-    f: Follower,
-    x: float,
-    y: float,
-    yaw: float,
-    seconds: float = 300.0,
-    icr: tuple[float, float] = (0.0, 0.0),
+    f: Follower, x: float, y: float, yaw: float, seconds: float = 300.0
 ) -> tuple[float, float, float, list[str]]:
     """Close the loop around a unicycle whose wheels follow commands with a 0.15 s
-    lag (which overshoots a plain stop by centimetres), until an event. ``icr``: where
-    it turns about, in base_link (m): a skid steer's turning centre is not base_link."""
+    lag (which overshoots a plain stop by centimetres), until an event."""
     v = w = 0.0
     dt, tau = 0.05, 0.15
     for k in range(int(seconds / dt)):
@@ -99,11 +93,8 @@ def run_lagging(
             return x, y, yaw, [c.event]
         v += (c.v - v) * (1 - math.exp(-dt / tau))
         w += (c.w - w) * (1 - math.exp(-dt / tau))
-        cy, sy = math.cos(yaw), math.sin(yaw)
-        # base_link turns about the centre at icr: it moves by w x (base_link - centre)
-        dx, dy = -(cy * icr[0] - sy * icr[1]), -(sy * icr[0] + cy * icr[1])
-        x += (v * cy - w * dy) * dt
-        y += (v * sy + w * dx) * dt
+        x += v * dt * math.cos(yaw)
+        y += v * dt * math.sin(yaw)
         yaw = wrap_angle(yaw + w * dt)
     return x, y, yaw, []
 
@@ -144,26 +135,6 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
     assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
     assert f.fine.reapproaches >= 1
-
-
-def test_the_shift_of_the_final_turn_is_trimmed_away_across_the_heading() -> None:
-    """A robot turning about a centre 3 cm ahead of base_link: the 90 deg turn to the
-    planned heading, after the place was fine-tuned on the leg, shifts it about 4 cm.
-    Side trims (a 5 deg detour, a creep to the line through the goal, back) place it
-    again; without them it ends where the turn left it."""
-    goal_yaw = math.radians(90)
-    leg = Leg(x0=0, y0=0, x1=2, y1=0, final_yaw=goal_yaw)
-    ends = {}
-    for trims in (0, 2):
-        cfg = FollowerConfig(side_trims=trims)
-        f = Follower(cfg)
-        f.start("turned", [leg])
-        x, y, yaw, events = run_lagging(f, 1.0, 0.0, 0.0, 600.0, icr=(0.03, 0.0))
-        assert events == ["arrived"], trims
-        assert abs(math.degrees(wrap_angle(yaw - goal_yaw))) <= cfg.fine_heading_tolerance_deg
-        ends[trims] = (math.hypot(x - 2.0, y), f.fine.side_trims)
-    assert ends[0][0] > 0.02 and ends[0][1] == 0
-    assert ends[2][0] <= FollowerConfig().fine_tolerance_m + 0.001 and ends[2][1] >= 1
 
 
 def test_no_fine_positioning_when_disabled() -> None:
