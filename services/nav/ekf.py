@@ -38,6 +38,7 @@ from services.nav.ekf_guard import (
     check_heading,
     check_height,
     check_odometry,
+    eigenvalues_2x2,
     state_problem,
 )
 from services.nav.ekf_models import (
@@ -127,10 +128,9 @@ class Localizer:
         self._p = np.array(p, dtype=float).reshape(5, 5)
 
     def position_sigma(self) -> float:
-        # the larger eigenvalue of the 2 x 2 position block, in closed form (asked on
-        # every tick and every IMU sample)
-        a, d, b = self._p[0, 0], self._p[1, 1], self._p[0, 1]
-        return math.sqrt(max(0.5 * (a + d) + math.hypot(0.5 * (a - d), b), 0.0))
+        p = self._p
+        _, hi = eigenvalues_2x2(float(p[0, 0]), float(p[1, 1]), float(p[0, 1]))
+        return math.sqrt(max(hi, 0.0))
 
     def localized(self) -> bool:
         return self.initialized and self.position_sigma() <= self.cfg.localized_sigma_m

@@ -41,12 +41,15 @@ TILT = (
     "the simulated ground); and the fix's noise under the crop averaged longer on arrival"
 )
 TURN = (
-    "a place trim after the final turn: the fine phase places the robot on the leg's "
-    "heading and then turns in place to the planned heading, and the turn moves a skid "
-    "steer's centre (the simulated turning centre wanders 3 cm) sideways to the new "
-    "heading, where no creep along it takes the robot back (compare the estimate "
-    "against the plan and against the truth below); turning a few degrees, creeping "
-    "and turning back would remove it"
+    "placing the robot again after the final turn: the fine phase places it on the "
+    "leg's heading and then turns in place to the planned heading, and the turn moves a "
+    "skid steer's centre (the simulated turning centre wanders 3 cm) sideways to the new "
+    "heading, where no creep along it takes the robot back (compare the estimate against "
+    "the plan and against the truth below). A side trim (a 5 deg detour, a creep to the "
+    "line through the goal, back) was tried and was not reliable: its creep, about 12 "
+    "times the offset, multiplies the heading's noise under the crop. Next to try: turn "
+    "to the planned heading first, then back up along it and come in again, as the "
+    "leg's re-approach does"
 )
 CORNERS = (
     "a tracker that closes the corner turn's sideways shift faster (yaw-rate feedback, "
