@@ -194,7 +194,7 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
     )
     legs = ex.legs_through(pts)
     length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
-    state = _follow(bus, rec, legs, args.experiment, timeout=60 + 10 * length / args.rtf)
+    state = _follow(bus, rec, legs, args.experiment, timeout=60 + 20 * length / args.rtf)
     with rec.lock:
         rows = [
             (t, p)
