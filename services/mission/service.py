@@ -265,7 +265,7 @@ class MissionService:
                 tag = f"scan {step.scan_id} (location {step.cand_id})"
                 if step.status == "scanning":
                     self.phase = MissionPhase.SETTLING
-                    if sv.found_on_scanner(step):
+                    if sv.scans.found_on_scanner(step):
                         self.event("info", f"{tag}: done")
                         continue
                     # whatever the scanner holds for it is not taken after another restart
@@ -314,7 +314,7 @@ class MissionService:
                 return
             self.phase = MissionPhase.SCANNING
             prof = msgspec.structs.replace(self.cfg.profile, scan_id=log.steps()[idx].scan_id)
-            why = sv.scan(log.steps()[idx], prof)
+            why = sv.scans.scan(log.steps()[idx], prof)
             if not why:
                 self.event("info", f"{tag}: done")
                 return

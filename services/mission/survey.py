@@ -32,14 +32,14 @@ from common.messages.nav import (
     PoseEstimate,
     RenewRoute,
 )
-from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
+from common.messages.scan import ScannerStatus
 from common.missionlog import Step
 from common.service import Context
 from common.transport import Bus, Latest, RpcError, RpcTimeout
 from services.mission.config import MissionConfig
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
-from services.mission.stats import pose_stats, tilt_stats
+from services.mission.scanning import Scans
 
 Q = TypeVar("Q")
 R = TypeVar("R")
@@ -91,6 +91,7 @@ class Survey:
         feeds.on_pose = self._on_pose  # the previous survey, ended, hears no more
         self.detail = ""
         self._routes = 0
+        self.scans = Scans(self)
 
     def _on_pose(self, p: PoseEstimate) -> None:
         with self._lock:
@@ -102,6 +103,17 @@ class Survey:
                 dt = min((p.stamp_ns - self._last_pose.stamp_ns) / NS, 1.0)
                 self.distance += abs(p.v) * dt
             self._last_pose = p
+
+    def collect(self, poses: list[PoseEstimate] | None) -> None:
+        """Collect every pose from now on after ``poses`` (None: stop collecting)."""
+        with self._lock:
+            self._collect = poses
+
+    def collected(self) -> list[PoseEstimate]:
+        """The poses collected so far; collection stops."""
+        with self._lock:
+            poses, self._collect = self._collect or [], None
+        return poses
 
     def now(self) -> int:
         return self.ctx.clock.now_ns()
@@ -272,137 +284,3 @@ class Survey:
             self.event("warning", f"{tag}: {100 * off:.1f} cm from the planned location")
             drive_first = True
         return f"still {100 * off:.1f} cm off after {self.cfg.position_retries + 1} tries"
-
-    # --- scanning ---
-    def found_on_scanner(self, step: Step) -> bool:
-        """A step the mission left in ``scanning`` (it restarted): True, and recorded,
-        when the scanner finished that scan, or finishes the one it is still taking,
-        and the robot stands where planned; never a second scan of a location that
-        has one."""
-        t0 = self.now()
-        while (st := self.scanner.get()) is None:  # a restarted mission hears it soon
-            if (self.now() - t0) / NS > self.cfg.scanner_lost_s:
-                self.event("warning", f"scan {step.scan_id}: no word from the scanner")
-                return False
-            t0 += self.wait(0.1)
-        if st.scan_id != step.scan_id or st.state not in (ScannerState.DONE, ScannerState.SCANNING):
-            self.event("info", f"scan {step.scan_id}: scanner at {st.scan_id}, {st.state}")
-            return False
-        p = self.settle()
-        if p is None or self.off_by(step, p.x, p.y) > self.cfg.arrival_tolerance_m:
-            where = "no pose" if p is None else f"{100 * self.off_by(step, p.x, p.y):.1f} cm off"
-            self.event("warning", f"scan {step.scan_id}: on the scanner, but the robot is {where}")
-            return False
-        what = "done" if st.state == ScannerState.DONE else "still scanning"
-        self.event("info", f"scan {step.scan_id}: found {what} on the scanner after a restart")
-        if st.state == ScannerState.DONE:
-            return not self._record(step, st, [p])
-        with self._lock:  # the pose over the rest of the scan
-            self._collect = [p]
-        try:  # only statuses the scanner stamped after the one just seen
-            return not self._await_scan(step, st.stamp_ns)
-        finally:
-            with self._lock:
-                self._collect = None
-
-    def scan(self, step: Step, prof: ScanProfile) -> str:
-        """One attempt at ``step``'s scan: "" when done and recorded, else why not."""
-        self.log.update(
-            step.idx, status="scanning", attempts=step.attempts + 1, started_ns=self.now()
-        )
-        with self._lock:
-            self._collect = []
-        try:
-            took = self.call(keys.SCANNER_CMD, StartScan(profile=prof, project=self.mission))
-        except RpcError as exc:
-            # a device still busy with a failed scan (stuck, say) refuses the next:
-            # end whatever it is doing before the next attempt
-            self._stop_scan()
-            self.wait(2.0)
-            return f"start failed: {exc}"
-        try:
-            why = self._await_scan(step, took.stamp_ns)
-        finally:
-            with self._lock:
-                self._collect = None
-        if why:
-            # no longer "scanning": a mission restarted now must not take this
-            # attempt's scan from the scanner (its DONE may be one rejected here, taken
-            # off the plan or while moving); it positions and scans again
-            self.log.update(step.idx, status="driving")
-        return why
-
-    def _await_scan(self, step: Step, since_ns: int) -> str:
-        """Wait for ``step``'s scan to end and record it. ``since_ns``: a stamp of the
-        scanner's own clock (its reply to this attempt's StartScan, or a status of the
-        scan already seen); only statuses it stamped later speak of this attempt. The
-        scanner republishes its state every tick, so the previous attempt's DONE (same
-        scan id) keeps fresh stamps until the start is handled, and the mission's clock
-        is no judge of them: under load two processes' sim clocks differ by seconds,
-        and in the field the scanner's computer keeps its own time (a retried scan was
-        once recorded from such a DONE while the real one was taken on the drive to the
-        next location)."""
-        t0 = seen = self.now()
-        while True:
-            paused = self.wait(0.2)
-            t0, seen = t0 + paused, seen + paused
-            now = self.now()
-            if (now - t0) / NS > self.cfg.scan_timeout_s:
-                self._stop_scan()
-                return f"no end in {self.cfg.scan_timeout_s:.0f} s"
-            st = self.scanner.get()
-            # a status from before this attempt (a retry follows an error for the
-            # same scan id) says nothing about it
-            stale = st is not None and st.stamp_ns <= since_ns
-            if st is None or stale or st.scan_id != step.scan_id:
-                if (now - seen) / NS > self.cfg.scanner_lost_s:
-                    self._stop_scan()  # a device still scanning would refuse the retry
-                    lost = self.cfg.scanner_lost_s
-                    return f"scanner lost the scan (no status for it in {lost:.0f} s)"
-                continue
-            seen = now
-            if st.state == ScannerState.ERROR:
-                # the service gave up on the scan (stuck, silent); the device may still
-                # be taking it, and would refuse the next one as busy
-                self._stop_scan()
-                self.wait(1.0)
-                return f"scanner error: {st.error}"
-            if st.state == ScannerState.DONE:
-                with self._lock:
-                    poses, self._collect = self._collect or [], None
-                return self._record(step, st, poses)
-
-    def _record(self, step: Step, st: ScannerStatus, poses: list[PoseEstimate]) -> str:
-        """Record the scan as done if the pose over it was where planned: its mean
-        within the arrival tolerance, its spread within half of it, localized for at
-        least half the scan (a standing robot's estimate rides out a short RTK float
-        on zero-velocity updates; the statistics use the localized poses only)."""
-        good = [p for p in poses if p.localized]
-        if 2 * len(good) < max(len(poses), 1):
-            return f"localized for only {len(good)} of {len(poses)} poses during the scan"
-        stats = pose_stats(good)
-        off = self.off_by(step, stats["mean_x"], stats["mean_y"])
-        moved = math.hypot(stats["sd_x"], stats["sd_y"])
-        tol = self.cfg.arrival_tolerance_m
-        if off > tol or moved > tol / 2:
-            return (
-                f"pose during the scan {100 * off:.1f} cm off the plan "
-                f"(SD {100 * moved:.1f} cm): not recorded as done"
-            )
-        self.log.update(
-            step.idx,
-            status="done",
-            file=st.file,
-            ended_ns=self.now(),
-            pitch=st.pitch,
-            roll=st.roll,
-            **stats,
-            **tilt_stats(good),
-        )
-        return ""
-
-    def _stop_scan(self) -> None:
-        try:
-            self.ctx.bus.call(keys.SCANNER_CMD, StopScan(), timeout=self.cfg.rpc_timeout_s)
-        except RpcError as exc:
-            self.event("warning", f"scanner: stop failed: {exc}")

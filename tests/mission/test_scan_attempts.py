@@ -125,7 +125,7 @@ def retry(bus: Bus, tmp_path: Path, scanner: OffsetScanner) -> tuple[str, Step, 
     try:
         seen = survey.scanner.wait_for(lambda s: s.file == "first.e57", timeout=10)
         assert seen is not None, "the scanner's status never reached the mission"
-        why = survey.scan(log.steps()[0], MissionConfig().profile)
+        why = survey.scans.scan(log.steps()[0], MissionConfig().profile)
         return why, log.steps()[0], events
     finally:
         scanner.close()
