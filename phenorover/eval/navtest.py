@@ -6,6 +6,7 @@ from ``deploy/sim.toml``) and the simulator's default error models. Writes
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -22,7 +23,14 @@ import tomli_w
 from common import keys
 from common.config import load_manifest
 from common.field import load_field
-from common.messages.nav import FollowRoute, Leg, NavProgress, NavState, PoseEstimate
+from common.messages.nav import (
+    FollowRoute,
+    Leg,
+    NavProgress,
+    NavState,
+    PoseEstimate,
+    RenewRoute,
+)
 from common.messages.sim import TruthPose
 from common.process import free_loopback_port
 from common.transport import Bus, RpcError
@@ -30,6 +38,7 @@ from phenorover.eval import experiments as ex
 from phenorover.eval import profiles
 
 SERVICES = ("sim", "base", "gnss", "nav")
+LEASE_S = 3600.0  # the longest a route may be leased for (FollowRoute.lease_s)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -95,15 +104,21 @@ def _follow(bus: Bus, rec: Recorder, legs: list[Leg], route_id: str, timeout: fl
     deadline = time.monotonic() + 15
     while True:
         try:
-            # an experiment watched by its operator: a lease as long as the run
-            route = FollowRoute(route_id=route_id, legs=legs, lease_s=3600.0)
+            # an experiment watched by its operator: the longest lease, renewed below
+            # (a slow profile drives the serpentine's 612 m for over an hour)
+            route = FollowRoute(route_id=route_id, legs=legs, lease_s=LEASE_S)
             bus.call(keys.NAV_CMD, route, timeout=2)
             break
         except RpcError:
             if time.monotonic() > deadline:
                 raise
     end = time.monotonic() + timeout
+    renewed = time.monotonic()
     while time.monotonic() < end:
+        if time.monotonic() - renewed > 30.0:  # 30 s of wall time: minutes of sim time
+            with contextlib.suppress(RpcError):
+                bus.call(keys.NAV_CMD, RenewRoute(route_id, LEASE_S), timeout=2)
+            renewed = time.monotonic()
         p = rec.progress
         if (
             p is not None

@@ -15,13 +15,11 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     ``align_tolerance_deg`` 0.5 close the corner turn's sideways shift and heading
     error about twice as fast (pure pursuit settles a lateral offset over two to
     three look-aheads of travel), while a centimetre of estimate noise still steers
-    by only a degree. Cruise at ``max_speed`` 0.15 m/s: the lateral slip the wheels
+    by only a degree. Cruise at ``max_speed`` 0.3 m/s: the lateral slip the wheels
     cannot see grows with the square root of the speed over each metre, and the crop's
-    fix noise, correlated over seconds, is averaged over more fixes per metre. On the
-    calibrated simulator 0.15 m/s took a fifth off the mean cross-track error of 0.3
-    m/s (border 1.84-1.99 -> 1.46-1.55 cm, serpentine about 2.1 -> 1.67 cm, seed 1);
-    bench_profiles measures it against the paper's method. A survey's driving (ENGR:
-    minutes) is small beside its scans (7-10 minutes each)."""
+    correlated fix noise is averaged over more fixes per metre (bench_profiles
+    measures it); a survey's driving (minutes) is small beside its scans (minutes
+    each)."""
 
     lookahead_m: Pos = 0.6
     # an in-place turn toward a leg ends within this of the leg's heading
@@ -30,7 +28,7 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     # lateral offset over about one look-ahead of travel, and the corner turn before
     # it shifts the robot sideways by centimetres
     final_lookahead_m: Pos = 0.5
-    max_speed: Pos = 0.15
+    max_speed: Pos = 0.3
     max_accel: Pos = 0.5
     max_turn_rate: Pos = 0.6
     max_turn_accel: Pos = 1.5
