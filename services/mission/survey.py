@@ -21,6 +21,7 @@ from typing import TypeVar
 
 from common import clock as clk
 from common import keys
+from common.clock import NS
 from common.keys import Rpc
 from common.messages.nav import (
     LEASE_ENDED,
@@ -43,7 +44,6 @@ from services.mission.scanning import Scans
 
 Q = TypeVar("Q")
 R = TypeVar("R")
-NS = 1_000_000_000
 SKEW_NS = NS // 5
 
 

@@ -45,11 +45,9 @@ PLACED = (
     "moment, and over the hold the estimate moved to where the robot stands (compare the "
     "estimate against the plan and against the truth below). Driven in under the crop, "
     "the estimate stays 1-2 cm off the truth through the 20 s settle, and each "
-    "re-approach lands about a centimetre to either side. Tried and not taken: standing "
-    "until the filter's position sigma is 3 mm, then side trims (a 2 deg detour, a creep "
-    "to the line through the goal, back) carried by odometry: 1.37, 0.99, 0.39 cm on "
-    "seeds 1-3, at 4-6 minutes a location, since on the loose ground every trim of the "
-    "heading moves the robot millimetres unseen (the turning centre wanders 7.5 cm). "
+    "re-approach lands about a centimetre to either side. A longer settle with side "
+    "trims carried by odometry was tried and not taken (CHANGELOG.md): on the loose "
+    "ground every trim of the heading moves the robot millimetres unseen. "
     "Next: a lateral reference that stands still, the lidar's view of the plot edges"
 )
 CORNERS = (
