@@ -287,7 +287,7 @@ class MissionService:
         # the final phase is set last: whoever sees it may start the next mission at once
         except Aborted:
             if self._abort.is_set():
-                sv._cancel("")
+                sv.cancel()
                 log.set_state("aborted")
                 self.event("warning", f"mission {self.mission} aborted")
                 self.phase = MissionPhase.ABORTED

@@ -187,7 +187,7 @@ class Survey:
                 # later): the route is cancelled, and sent again from where the robot
                 # stands once resumed, under an id of its own (the cancelled route's
                 # outcome must not be taken for it)
-                self._cancel(rid)
+                self.cancel(rid)
                 t0 += self.wait(0.0)
                 pauses += 1
                 rid = f"{route_id}.p{pauses}"
@@ -196,7 +196,7 @@ class Survey:
             self.sleep(0.1)  # not wait(): a pause is seen above, while driving
             now = self.now()
             if now - t0 > limit_ns:
-                self._cancel(rid)
+                self.cancel(rid)
                 return False, f"no arrival in {limit_ns / NS:.0f} s"
             p = self.progress.get()
             # progress of this route since it was (last) sent; services on a sim clock
@@ -226,7 +226,9 @@ class Survey:
                     self.event("warning", f"{rid}: {rep.reason}; sending it again")
                     sent = renewed = self._send(seg, rid)
 
-    def _cancel(self, rid: str) -> None:
+    def cancel(self, rid: str = "") -> None:
+        """Stop route ``rid`` now, or whatever route navigation follows when ``rid``
+        is empty (an abort does not know which of its resends is running)."""
         with contextlib.suppress(RpcError):  # the lease stops the robot anyway
             self.ctx.bus.call(keys.NAV_CMD, CancelRoute(route_id=rid), timeout=2.0)
 
