@@ -34,7 +34,7 @@ from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import Localizer
 from services.nav.follower import Follower
 from services.nav.gyro import Gyro
-from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
+from services.nav.obstacles import ObstacleWatch, hits_ahead, hits_on_leg
 from services.nav.tilt import Tilt, tilt_of
 
 
@@ -46,6 +46,8 @@ class NavService:
         self.frame, fld = load_georeferenced(ctx.field)
         grow = cfg.route_margin_m
         self.route_box = fld.bounds + np.array([-grow, -grow, grow, grow])
+        g = cfg.obstacle_crop_margin_m
+        self.crop = fld.plot_boxes[:, [0, 1, 3, 4]] + np.array([-g, -g, g, g])
         self.loc = Localizer(cfg.ekf)
         self.follower = Follower(cfg.follower)
         self.tilt = Tilt(cfg.tilt, ctx.robot.imu)
@@ -57,8 +59,7 @@ class NavService:
         self._odom_at = 0.0  # when the last odometry arrived (s)
         self._scan: tuple[int, float] | None = None  # (scan id, when its scan was seen)
         self._lock = threading.Lock()
-        self._obstacle = False
-        self._obstacle_run = 0  # consecutive scans with an obstacle in the box
+        self.obstacles = ObstacleWatch(cfg.obstacle_min_points, cfg.obstacle_scans)
         self._moving_until = 0.0  # time of the last non-zero velocity command (s)
         self._last_fix = -math.inf  # time of the last fused fix (s)
         bus = ctx.bus
@@ -184,32 +185,22 @@ class NavService:
             leg = f.legs[f.leg] if f.active and f.legs else None
         pose = (float(x[0]), float(x[1]), float(x[2]))
         ranges = m.ranges.numpy()
+        lidar, front = self.mounts.lidar, self.mounts.front
+        box = (c.obstacle_distance_m, c.obstacle_half_width_m)
         if leg is not None:
-            hit = obstacle_on_leg(
-                ranges,
-                m.angle_min,
-                m.angle_increment,
-                self.mounts.lidar,
-                pose,
-                (leg.x0, leg.y0, leg.x1, leg.y1),
-                self.mounts.front,
-                c.obstacle_distance_m,
-                c.obstacle_half_width_m,
-                c.obstacle_min_points,
+            ends = (leg.x0, leg.y0, leg.x1, leg.y1)
+            hits = hits_on_leg(
+                ranges, m.angle_min, m.angle_increment, lidar, pose, ends, front, *box, self.crop
             )
+            where = "field"
         else:
-            hit = obstacle_ahead(
-                ranges,
-                m.angle_min,
-                m.angle_increment,
-                self.mounts.lidar,
-                self.mounts.front,
-                c.obstacle_distance_m,
-                c.obstacle_half_width_m,
-                c.obstacle_min_points,
-            )
-        self._obstacle_run = self._obstacle_run + 1 if hit else 0
-        self._obstacle = self._obstacle_run >= c.obstacle_scans
+            hits = hits_ahead(ranges, m.angle_min, m.angle_increment, lidar, front, *box)
+            where = "base_link"
+        said = self.obstacles.update(hits, where)
+        if said and leg is not None:  # standing between routes, nothing waits on it
+            at = f"; robot at ({pose[0]:.2f}, {pose[1]:.2f}, {math.degrees(pose[2]):.1f} deg)"
+            held = self.obstacles.held
+            (self.ctx.log.warning if held else self.ctx.log.info)("%s%s", said, at if held else "")
 
     def handle(self, cmd: NavCommand) -> NavReply:
         now = self.ctx.clock.now_ns()
@@ -292,7 +283,7 @@ class NavService:
                 x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
                 localized = self._localized(t)
                 tilt = self.tilt.tilt(t)
-                cmd = self.follower.step(t, x[0], x[1], x[2], localized, self._obstacle)
+                cmd = self.follower.step(t, x[0], x[1], x[2], localized, self.obstacles.held)
                 active = self.follower.active
                 if cmd.v or cmd.w:
                     self._moving_until = t

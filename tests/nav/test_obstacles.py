@@ -4,9 +4,12 @@ import math
 
 import numpy as np
 
-from services.nav.obstacles import obstacle_ahead, obstacle_on_leg
+from services.nav.obstacles import ObstacleWatch, hits_ahead, hits_on_leg
 
 ANG = np.radians(np.arange(-135.0, 135.01, 0.25))
+INC = float(ANG[1] - ANG[0])
+LIDAR = (0.45, 0.0, 0.0)  # in base_link
+FRONT = 0.495  # the robot's front, base_link x
 
 
 def ranges_to(points_body: list[tuple[float, float]]) -> np.ndarray:
@@ -29,22 +32,56 @@ def test_plot_edge_beside_the_lane_is_not_an_obstacle_when_slightly_off() -> Non
         for x, y in edge
     ]
     r = ranges_to(body)
-    assert obstacle_ahead(r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0, 0.0), 0.495, 0.6, 0.30)
-    assert not obstacle_on_leg(
-        r, ANG[0], ANG[1] - ANG[0], (0.45, 0.0, 0.0), pose, (-5.0, 0.0, 10.0, 0.0), 0.495, 0.6, 0.30
-    )
+    assert len(hits_ahead(r, ANG[0], INC, LIDAR, FRONT, 0.6, 0.30)) >= 3
+    leg = (-5.0, 0.0, 10.0, 0.0)
+    assert len(hits_on_leg(r, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30)) == 0
 
 
-def test_box_in_the_lane_is_an_obstacle() -> None:
+def test_box_in_the_lane_is_an_obstacle_and_its_returns_are_in_the_field_frame() -> None:
     r = ranges_to([(0.8, y) for y in np.linspace(-0.15, 0.15, 7)])
-    assert obstacle_on_leg(
-        r,
-        ANG[0],
-        ANG[1] - ANG[0],
-        (0.45, 0.0, 0.0),
-        (0.0, 0.0, 0.0),
-        (0.0, 0.0, 10.0, 0.0),
-        0.495,
-        0.6,
-        0.30,
-    )
+    pose = (2.0, 1.0, 0.0)
+    hits = hits_on_leg(r, ANG[0], INC, LIDAR, pose, (0.0, 1.0, 10.0, 1.0), FRONT, 0.6, 0.30)
+    assert len(hits) == 7
+    assert np.allclose(hits[:, 0], 2.8, atol=0.01)
+    assert np.all(np.abs(hits[:, 1] - 1.0) <= 0.16)
+
+
+def test_what_lies_beyond_the_legs_end_is_not_on_the_leg() -> None:
+    # 0.2 m before the leg's end: a plot 0.6 m ahead of the front is past where the
+    # front will stop, so it does not hold the robot up; 0.1 m ahead of it, it does
+    pose = (9.8, 0.0, 0.0)
+    leg = (0.0, 0.0, 10.0, 0.0)
+    far = ranges_to([(FRONT + 0.5, y) for y in np.linspace(-0.1, 0.1, 5)])
+    near = ranges_to([(FRONT + 0.1, y) for y in np.linspace(-0.1, 0.1, 5)])
+    assert len(hits_on_leg(far, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30)) == 0
+    assert len(hits_on_leg(near, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30)) == 5
+    # the body-aligned box knows no leg and sees both
+    assert len(hits_ahead(far, ANG[0], INC, LIDAR, FRONT, 0.6, 0.30)) == 5
+
+
+def test_the_watch_holds_after_consecutive_scans_and_says_where_and_when_clear() -> None:
+    watch = ObstacleWatch(min_points=3, scans=2)
+    box = np.array([[1.0, -0.1], [1.1, 0.0], [1.2, 0.1]])
+    assert watch.update(box, "field") is None  # one scan is not enough
+    assert watch.update(box[:2], "field") is None  # too few returns: the run restarts
+    assert watch.update(box, "field") is None
+    said = watch.update(box, "field")
+    assert watch.held and said is not None and "x 1.00..1.20" in said and "y -0.10..0.10" in said
+    assert watch.update(box, "field") is None  # still held: said once
+    assert watch.update(np.empty((0, 2)), "field") == "obstacle: the box ahead is clear"
+    assert not watch.held
+
+
+def test_the_crop_at_the_lanes_edge_is_not_an_obstacle_but_a_box_in_the_lane_is() -> None:
+    # lane along y = 19 (-x), plot below it up to y = 18.6; the estimate 10 cm off puts
+    # the plot's edge 0.30 m from the lane's centre, inside the box
+    pose = (26.9, 19.0, math.pi)
+    leg = (28.5, 19.0, 1.5, 19.0)
+    plot = np.array([[24.75, 17.6, 27.75, 18.6]])
+    crop = plot + np.array([-0.15, -0.15, 0.15, 0.15])
+    edge = [(0.6 + 0.05 * k, 0.299) for k in range(12)]  # body frame: on the left
+    r = ranges_to(edge)
+    assert len(hits_on_leg(r, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30)) >= 3
+    assert len(hits_on_leg(r, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30, crop)) == 0
+    person = ranges_to([(0.8, y) for y in np.linspace(-0.1, 0.1, 5)])
+    assert len(hits_on_leg(person, ANG[0], INC, LIDAR, pose, leg, FRONT, 0.6, 0.30, crop)) == 5
