@@ -119,6 +119,7 @@ def stationary_stats(xy: F64, yaw: F64, goal: tuple[float, float, float]) -> dic
         "residual_x_sd_cm": float(100 * res[:, 0].std()),
         "residual_y_sd_cm": float(100 * res[:, 1].std()),
         "heading_error_mean_abs_deg": float(np.abs(herr).mean()),
+        "heading_error_mean_deg": float(herr.mean()),
         "heading_residual_mean_abs_deg": float(np.abs(hres).mean()),
         "heading_residual_sd_deg": float(np.std(herr)),
     }
