@@ -15,11 +15,12 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     ``align_tolerance_deg`` 0.5 close the corner turn's sideways shift and heading
     error about twice as fast (pure pursuit settles a lateral offset over two to
     three look-aheads of travel), while a centimetre of estimate noise still steers
-    by only a degree. Cruise at ``max_speed`` 0.3 m/s: the lateral slip the wheels
+    by only a degree. Cruise at ``max_speed`` 0.15 m/s: the lateral slip the wheels
     cannot see grows with the square root of the speed over each metre, and the crop's
-    correlated fix noise is averaged over more fixes per metre (bench_profiles
-    measures it); a survey's driving (minutes) is small beside its scans (minutes
-    each)."""
+    fix noise, correlated over seconds, is averaged over more fixes per metre; on the
+    calibrated simulator that takes about a fifth off 0.3 m/s's mean cross-track
+    error (bench_profiles measures it against the paper's method, docs/results.md).
+    A survey's driving (ENGR: minutes) is small beside its scans (minutes each)."""
 
     lookahead_m: Pos = 0.6
     # an in-place turn toward a leg ends within this of the leg's heading
@@ -28,7 +29,7 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     # lateral offset over about one look-ahead of travel, and the corner turn before
     # it shifts the robot sideways by centimetres
     final_lookahead_m: Pos = 0.5
-    max_speed: Pos = 0.3
+    max_speed: Pos = 0.15
     max_accel: Pos = 0.5
     max_turn_rate: Pos = 0.6
     max_turn_accel: Pos = 1.5

@@ -47,7 +47,7 @@ def square() -> list[Leg]:
 def test_square_route_arrives_once_within_tolerances() -> None:
     f = Follower(FollowerConfig())
     f.start("sq", square())
-    x, y, yaw, events, xtes = run(f, 0.0, 0.0, 0.0, 120.0)
+    x, y, yaw, events, xtes = run(f, 0.0, 0.0, 0.0, 240.0)
     assert events == ["arrived"]
     assert math.hypot(x, y) < 0.03
     assert abs(wrap_angle(yaw - 0.0)) <= math.radians(2.0) + 1e-6
