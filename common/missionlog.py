@@ -17,6 +17,10 @@ Schema:
   (metres, radians); the inclinometer's ``pitch`` and ``roll`` (radians);
   ``nav_roll`` and ``nav_pitch``, the mean tilt navigation put the antennas' lever arms
   through over the scan (radians; NULL: a planar estimate, antennas taken upright);
+  ``pose_x``, ``pose_y``, ``pose_z``, ``pose_yaw``: the navigation pose the scan is
+  placed with (metres, radians), by default the estimate at the scan's end (see
+  ``[services.mission] scan_pose``; NULL in a log written before the columns
+  existed, whose readers take the means);
   ``reason`` for a failed or skipped step.
 - ``events``: ``stamp_ns``, ``level`` (info, warning, error), ``text``.
 """
@@ -40,7 +44,8 @@ CREATE TABLE IF NOT EXISTS steps (
     file TEXT, started_ns INTEGER, ended_ns INTEGER,
     mean_x REAL, mean_y REAL, mean_z REAL, mean_yaw REAL,
     sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL, pitch REAL, roll REAL, reason TEXT,
-    nav_roll REAL, nav_pitch REAL
+    nav_roll REAL, nav_pitch REAL,
+    pose_x REAL, pose_y REAL, pose_z REAL, pose_yaw REAL
 );
 CREATE TABLE IF NOT EXISTS events (
     stamp_ns INTEGER NOT NULL, level TEXT NOT NULL, text TEXT NOT NULL
@@ -85,11 +90,22 @@ class Step:
     reason: str | None = None
     nav_roll: float | None = None
     nav_pitch: float | None = None
+    pose_x: float | None = None
+    pose_y: float | None = None
+    pose_z: float | None = None
+    pose_yaw: float | None = None
 
 
 # columns added since the first schema: (name, SQL type), added to an older log that
 # a mission resumes
-ADDED_COLUMNS = (("nav_roll", "REAL"), ("nav_pitch", "REAL"))
+ADDED_COLUMNS = (
+    ("nav_roll", "REAL"),
+    ("nav_pitch", "REAL"),
+    ("pose_x", "REAL"),
+    ("pose_y", "REAL"),
+    ("pose_z", "REAL"),
+    ("pose_yaw", "REAL"),
+)
 
 
 @dataclasses.dataclass(frozen=True)

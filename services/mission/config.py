@@ -1,4 +1,4 @@
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -28,6 +28,10 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     ``rpc_timeout_s`` (wall) per call; a service silent for ``rpc_patience_s`` (wall,
     a restart takes seconds) fails the mission. ``scanner_lost_s``: no status for the
     scan being taken for this long and the attempt is lost (the scanner restarted).
+    ``scan_pose``: the navigation pose a scan is recorded with, ``end`` (the estimate
+    at the scan's end: standing, our filter averages every fix since the robot
+    stopped) or ``mean`` (the mean over the scan, for a filter that forgets while
+    standing; :func:`services.mission.stats.scan_pose`).
     ``resume``: pick up an unfinished mission found in the run
     folder when the service starts. ``register_on_done``: register the scans (``python
     -m services.register RUN_DIR --manifest M``, a child process at low priority, with
@@ -51,6 +55,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     rpc_patience_s: Pos = 120.0
     scanner_lost_s: Pos = 10.0
     plan_timeout_s: Pos = 300.0
+    scan_pose: Literal["end", "mean"] = "end"
     return_to_origin: bool = True
     resume: bool = True
     register_on_done: bool = True

@@ -16,7 +16,7 @@ from common.messages.nav import PoseEstimate
 from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
 from common.missionlog import Step
 from common.transport import RpcError
-from services.mission.stats import pose_stats, tilt_stats
+from services.mission.stats import pose_stats, scan_pose, tilt_stats
 
 if TYPE_CHECKING:
     from services.mission.survey import Survey
@@ -148,6 +148,7 @@ class Scans:
             roll=st.roll,
             **stats,
             **tilt_stats(good),
+            **scan_pose(good, self.sv.cfg.scan_pose),
         )
         return ""
 

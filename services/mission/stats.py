@@ -32,3 +32,22 @@ def tilt_stats(poses: list[PoseEstimate]) -> dict[str, float | None]:
     n = len(poses)
     roll, pitch = sum(p.roll for p in poses) / n, sum(p.pitch for p in poses) / n
     return {"nav_roll": roll, "nav_pitch": pitch}
+
+
+def scan_pose(poses: list[PoseEstimate], how: str = "end") -> dict[str, float]:
+    """The navigation pose a scan is placed with (``pose_x``, ``pose_y``, ``pose_z``,
+    ``pose_yaw``): ``end``, the last of ``poses`` (the estimate at the scan's end), or
+    ``mean``, their mean. A standing robot's filter (zero-velocity updates, no
+    process noise) is the running average of every fix since it stopped, so its last
+    estimate has seen them all, where the mean of its estimates weighs the early, less
+    informed ones as much; a filter that forgets while standing (the paper's, with
+    static process noise) is better averaged. Raises ValueError on no poses."""
+    if not poses:
+        raise ValueError("no poses over the scan")
+    if how == "end":
+        last = poses[-1]
+        return {"pose_x": last.x, "pose_y": last.y, "pose_z": last.z, "pose_yaw": last.yaw}
+    if how == "mean":
+        st = pose_stats(poses)
+        return {f"pose_{k}": st[f"mean_{k}"] for k in ("x", "y", "z", "yaw")}
+    raise ValueError(f"scan_pose: {how!r} is neither 'end' nor 'mean'")

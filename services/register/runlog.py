@@ -116,14 +116,18 @@ def find_scan(step: Step, run_dir: Path, scan_dirs: Sequence[Path] = ()) -> Path
 
 
 def nav_pose(step: Step, place: Placement, has_altitude: bool = True) -> F64:
-    """4x4 ``field <- scanner`` from the step's recorded mean pose and inclinometer
-    (paper eq. 1, :func:`common.poses.scanner_pose`), base_link corrected for the planar
-    antenna lever (see :class:`Placement`). Raises RunError naming the scan."""
-    vals = (step.mean_x, step.mean_y, step.mean_yaw, step.pitch, step.roll)
+    """4x4 ``field <- scanner`` from the step's recorded pose (``pose_*``; the means
+    over the scan in a log older than those columns) and inclinometer (paper eq. 1,
+    :func:`common.poses.scanner_pose`), base_link corrected for the planar antenna
+    lever (see :class:`Placement`). Raises RunError naming the scan."""
+    old = step.pose_x is None
+    x, y = (step.mean_x, step.mean_y) if old else (step.pose_x, step.pose_y)
+    yaw, z_rec = (step.mean_yaw, step.mean_z) if old else (step.pose_yaw, step.pose_z)
+    vals = (x, y, yaw, step.pitch, step.roll)
     if any(v is None for v in vals):
         raise RunError(f"scan {step.scan_id}: the mission log has no pose or tilt for it")
     x, y, yaw, pitch, roll = (float(v) for v in vals)  # type: ignore[arg-type]
-    z = float(step.mean_z or 0.0) if has_altitude else 0.0
+    z = float(z_rec or 0.0) if has_altitude else 0.0
     try:
         m = scanner_pose(x, y, z, yaw, pitch, roll, place.lever, math.radians(place.mount_yaw_deg))
     except PoseError as exc:

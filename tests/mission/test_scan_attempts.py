@@ -142,6 +142,8 @@ def test_a_retried_scan_waits_for_its_own_done(
     assert why == "", (why, events)
     assert recorded.status == "done"
     assert recorded.file == "second.e57", "recorded from the previous attempt's DONE"
+    # the pose the scan is placed with: the standing robot's estimate at the scan's end
+    assert (recorded.pose_x, recorded.pose_y, recorded.pose_yaw) == pytest.approx((X, Y, 0.0))
     assert scanner.replied_ns is not None
 
 

@@ -5,6 +5,7 @@ mission: the report comes from what is stored."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sqlite3
@@ -125,6 +126,22 @@ def test_corrupt_mission_db_is_one_line(tmp_path: Path, capsys) -> None:
     assert main([str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mission.db" in err[0]
+
+
+def test_nav_pose_takes_the_recorded_scan_pose_over_the_means(mission_dir: Path) -> None:
+    s = load_run(mission_dir).done[0]
+    assert s.pose_x is None  # this log predates the columns: the means place it
+    moved = dataclasses.replace(
+        s,
+        pose_x=(s.mean_x or 0.0) + 0.1,
+        pose_y=(s.mean_y or 0.0) - 0.2,
+        pose_z=s.mean_z,
+        pose_yaw=s.mean_yaw,
+    )
+    a, b = nav_pose(s, PLANAR), nav_pose(moved, PLANAR)
+    np.testing.assert_allclose(b[:3, 3] - a[:3, 3], [0.1, -0.2, 0.0], atol=1e-9)
+    turned = dataclasses.replace(moved, pose_yaw=(s.mean_yaw or 0.0) + 0.01)
+    assert euler_zyx(nav_pose(turned, PLANAR))[2] == pytest.approx(euler_zyx(a)[2] + 0.01)
 
 
 def test_nav_pose_is_eq1_with_the_inclinometer(mission_dir: Path) -> None:
