@@ -16,7 +16,8 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from common.field import (
+from common.field import assemble, load_field
+from common.field_model import (
     MAX_PLOTS,
     Altitude,
     Corner,
@@ -26,8 +27,6 @@ from common.field import (
     NonNeg,
     Pos,
     Voxel,
-    assemble,
-    load_field,
 )
 from common.geo import FieldFrame
 

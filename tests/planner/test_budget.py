@@ -14,7 +14,6 @@ import pytest
 
 from common.field import (
     FIELDS_DIR,
-    MAX_PLOTS,
     FieldError,
     FieldLayout,
     _clear,
@@ -22,6 +21,7 @@ from common.field import (
     load_field,
 )
 from common.field_geojson import field_from_geojson
+from common.field_model import MAX_PLOTS
 from phenorover.cli import main
 from services.planner.budget import OverBudget, PlanBudget, check
 from services.planner.request import confine
