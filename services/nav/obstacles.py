@@ -8,6 +8,8 @@ are, so a robot that waits in a lane can be told from one that waits for nothing
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -97,23 +99,31 @@ def hits_on_leg(
 class ObstacleWatch:
     """Whether the robot is held by an obstacle: ``min_points`` returns in the box
     in ``scans`` consecutive lidar scans (one scan's spray of returns from a leaf in
-    the wind, or dust, does not stop the robot)."""
+    the wind, or dust, does not stop the robot), and free again after as many scans
+    without. What changed is said at most once per ``quiet_s`` (s): an obstacle at the
+    box's edge may come and go for minutes, and the log must stay readable."""
 
-    def __init__(self, min_points: int, scans: int) -> None:
-        self.min_points, self.scans = min_points, scans
+    def __init__(self, min_points: int, scans: int, quiet_s: float = 10.0) -> None:
+        self.min_points, self.scans, self.quiet_s = min_points, scans, quiet_s
         self.held = False
-        self._run = 0  # consecutive scans with enough returns in the box
+        self._run = 0  # consecutive scans that disagree with ``held``
+        self._said_at = -math.inf  # when the robot's being held was last said
+        self._said = False  # the last hold was said: its end is said too
 
-    def update(self, hits: F64, frame: str) -> str | None:
-        """Take one scan's ``hits`` (k, 2; m, in ``frame``): what changed, in words
-        (the box's extent when the robot becomes held), or None."""
-        self._run = self._run + 1 if len(hits) >= self.min_points else 0
-        held = self._run >= self.scans
-        if held == self.held:
+    def update(self, t: float, hits: F64, frame: str) -> str | None:
+        """Take one scan's ``hits`` (k, 2; m, in ``frame``) at ``t`` (s): what changed,
+        in words (the returns' extent when the robot becomes held), or None."""
+        seen = len(hits) >= self.min_points
+        self._run = 0 if seen == self.held else self._run + 1
+        if self._run < self.scans:
             return None
-        self.held = held
-        if not held:
-            return "obstacle: the box ahead is clear"
+        self.held, self._run = seen, 0
+        if not seen:
+            said, self._said = self._said, False
+            return "obstacle: the box ahead is clear" if said else None
+        if t - self._said_at < self.quiet_s:
+            return None
+        self._said_at, self._said = t, True
         lo, hi = hits.min(axis=0), hits.max(axis=0)
         return (
             f"obstacle: {len(hits)} lidar returns in the box ahead, x {lo[0]:.2f}..{hi[0]:.2f}"

@@ -196,7 +196,7 @@ class NavService:
         else:
             hits = hits_ahead(ranges, m.angle_min, m.angle_increment, lidar, front, *box)
             where = "base_link"
-        said = self.obstacles.update(hits, where)
+        said = self.obstacles.update(m.stamp_ns / 1e9, hits, where)
         if said and leg is not None:  # standing between routes, nothing waits on it
             at = f"; robot at ({pose[0]:.2f}, {pose[1]:.2f}, {math.degrees(pose[2]):.1f} deg)"
             held = self.obstacles.held

@@ -59,17 +59,28 @@ def test_what_lies_beyond_the_legs_end_is_not_on_the_leg() -> None:
     assert len(hits_ahead(far, ANG[0], INC, LIDAR, FRONT, 0.6, 0.30)) == 5
 
 
-def test_the_watch_holds_after_consecutive_scans_and_says_where_and_when_clear() -> None:
+def test_the_watch_holds_and_frees_after_consecutive_scans_and_says_where() -> None:
     watch = ObstacleWatch(min_points=3, scans=2)
-    box = np.array([[1.0, -0.1], [1.1, 0.0], [1.2, 0.1]])
-    assert watch.update(box, "field") is None  # one scan is not enough
-    assert watch.update(box[:2], "field") is None  # too few returns: the run restarts
-    assert watch.update(box, "field") is None
-    said = watch.update(box, "field")
+    box, none = np.array([[1.0, -0.1], [1.1, 0.0], [1.2, 0.1]]), np.empty((0, 2))
+    assert watch.update(0.0, box, "field") is None  # one scan is not enough
+    assert watch.update(0.1, box[:2], "field") is None  # too few returns: the run restarts
+    assert watch.update(0.2, box, "field") is None and not watch.held
+    said = watch.update(0.3, box, "field")
     assert watch.held and said is not None and "x 1.00..1.20" in said and "y -0.10..0.10" in said
-    assert watch.update(box, "field") is None  # still held: said once
-    assert watch.update(np.empty((0, 2)), "field") == "obstacle: the box ahead is clear"
+    assert watch.update(0.4, box, "field") is None  # still held: said once
+    assert watch.update(0.5, none, "field") is None and watch.held  # one clear scan
+    assert watch.update(0.6, none, "field") == "obstacle: the box ahead is clear"
     assert not watch.held
+
+
+def test_an_obstacle_that_comes_and_goes_is_said_once_in_a_while() -> None:
+    watch = ObstacleWatch(min_points=1, scans=1, quiet_s=10.0)
+    box, none = np.array([[1.0, 0.0]]), np.empty((0, 2))
+    said = [watch.update(0.1 * k, box if k % 2 == 0 else none, "field") for k in range(100)]
+    holds = [s for s in said if s is not None and "returns" in s]
+    assert len(holds) == 1  # 10 s of flapping: one line, and its end
+    assert said.count("obstacle: the box ahead is clear") == 1
+    assert watch.update(10.0, box, "field") is not None  # the quiet time is over
 
 
 def test_the_crop_at_the_lanes_edge_is_not_an_obstacle_but_a_box_in_the_lane_is() -> None:
