@@ -29,7 +29,8 @@ def start_world(
         ("sim", ["real_time_factor=4.0", *sim_sets]),
         ("base", ["backend=sim"]),
         ("gnss", ["backend=sim"]),
-        ("nav", nav_sets),
+        # the stops are timed from twice the default cruise speed: the harder case
+        ("nav", ["follower.max_speed=0.3", *nav_sets]),
     ):
         args = [a for s in sets for a in ("--set", s)]
         pids[name] = procs.service(f"services.{name}", ep, *SIM, *args, log=tmp / f"{name}.log").pid
