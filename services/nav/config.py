@@ -30,10 +30,9 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``obstacle_min_points`` returns in ``obstacle_scans`` consecutive scans stop it.
     Returns within ``obstacle_crop_margin_m`` of a plot of the field description are
     the crop, not an obstacle, while a route is followed: under the canopy the
-    estimate may be 10 cm off (in one serpentine at 0.15 m/s a plot's edge, placed
-    by the estimate, stood 0.30 m from the lane's centre, not 0.40, and stopped the
-    robot), and a plot never moves out of the way. An obstacle that close to a plot
-    is missed; one in the lane's middle 0.5 m is not.
+    estimate may be 10 cm off, which places a plot's edge 0.40 m from the lane's
+    centre at 0.30 m, inside the box, and a plot never moves out of the way. An
+    obstacle that close to a plot is missed; one in the lane's middle 0.5 m is not.
     ``still_after_s``: how long after the last non-zero velocity command the robot is
     taken to stand (the drivetrain's lag is 0.15 s), provided its odometry reads
     still too (within 4 sigma of the encoders' noise); the filter then makes
