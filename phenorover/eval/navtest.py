@@ -62,11 +62,10 @@ def _manifest(
 ) -> Path:
     with src.open("rb") as f:
         m: dict[str, Any] = profiles.apply(tomllib.load(f), profile)
+    if seed is not None:
+        m = profiles.seeded(m, seed)
     m["services"] = {k: v for k, v in m["services"].items() if k in SERVICES}
     m["services"].setdefault("sim", {})["real_time_factor"] = rtf
-    if seed is not None:  # another draw of terrain, slip and receiver errors
-        m["services"]["sim"]["seed"] = seed
-        m["services"].setdefault("gnss", {})["seed"] = seed + 1
     # a private router port, so an experiment runs beside a deployment that is up
     m["zenoh"] = {**m.get("zenoh", {}), "listen": [f"tcp/127.0.0.1:{free_loopback_port()}"]}
     m["zenoh"].pop("connect", None)

@@ -18,8 +18,12 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
   the ENGR survey failed 2.6-4.3 deg off, where pure pursuit had steered to close a
   sideways offset, and a retry once ended 42 cm off).
 
-The registration's C2C refinement is the paper's already (30 cm correspondence
-radius, :mod:`services.register.refine`).
+- registration by the clouds alone: the paper's nav + C2C (FARO SCENE's
+  cloud-to-cloud, "based solely on overlapping points, without the need for
+  artificial targets") left its five spheres to the target-based reference, so the
+  baseline's pose graph has none (``use_targets`` off); ours puts in those it sees.
+  The C2C itself is the same (the paper's 30 cm search radius first,
+  :mod:`services.register.refine`).
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
         # its filter forgets while standing (static process noise): a scan is
         # placed with the mean of its estimates over the scan
         "mission": {"arrival_tolerance_m": PAPER_ARRIVAL_M, "scan_pose": "mean"},
+        "register": {"register": {"refine": {"use_targets": False}}},
     },
 }
 
@@ -75,4 +80,14 @@ def apply(manifest: dict[str, Any], profile: str) -> dict[str, Any]:
     if profile not in PROFILES:
         raise KeyError(f"no navigation profile {profile!r} (have: {', '.join(PROFILES)})")
     services = _merge(manifest.get("services", {}), PROFILES[profile])
+    return {**manifest, "services": services}
+
+
+def seeded(manifest: dict[str, Any], seed: int) -> dict[str, Any]:
+    """``manifest`` with another draw of the simulator's noise (slip, the IMU's bias)
+    and of the receivers' errors: ``seed`` for the simulator, ``seed + 1`` for the
+    receivers. The world itself (terrain, plants) is its own seed's and stays."""
+    services = dict(manifest.get("services", {}))
+    services["sim"] = {**services.get("sim", {}), "seed": seed}
+    services["gnss"] = {**services.get("gnss", {}), "seed": seed + 1}
     return {**manifest, "services": services}

@@ -3,7 +3,10 @@ simulated devices' backends), of ``make hil`` (deploy/hil.toml: the hardware
 backends against the simulated devices on their own wires) and of ``make sim`` with
 the paper's method (``paper``: deploy/sim.toml under the navigation profile of
 :mod:`phenorover.eval.profiles`, the baseline), one after the other, each scored
-against the simulator's truth with ``phenorover eval register``.
+against the simulator's truth with ``phenorover eval register``. ``sim`` and
+``paper`` run once per seed (``--seeds``: another draw of the simulator's noise and
+the receivers' errors, :func:`phenorover.eval.profiles.seeded`) and report the mean
+over the seeds with each seed's value beside it; ``hil`` runs its manifest's draw.
 
 Figures are reported, never asserted. Per manifest: locations scanned, the wall
 time of the whole command (services up, plan, survey, registration), the distance
@@ -19,7 +22,7 @@ truth; the nav + C2C cloud against the target-based one, 1.25 cm mean and 0.82 c
 SD), and ours against the baseline's (nav + C2C at most half of it, against the
 truth).
 
-    python tests/bench/bench_survey.py [--json OUT] [--only sim hil paper] [--keep]
+    python tests/bench/bench_survey.py [--json OUT] [--only sim hil paper] [--seeds 1 2 3] [--keep]
 
 ``--keep`` carries the figures of the surveys not run from the ``--json`` file (each
 keeps its own date and commit), so one survey can be run again alone.
@@ -124,8 +127,10 @@ def true_stops_cm(run_dir: Path) -> list[float]:
 
 def registration(run_dir: Path) -> tuple[dict[str, float], str]:
     """``phenorover eval register`` on a survey: its figures against the truth (cm):
-    ``c2c`` (nav + C2C mean point error), ``nav`` and ``nav_max`` (navigation alone,
-    the pre-alignment: mean and largest point error), ``hausdorff_mean`` and
+    ``c2c`` (nav + C2C mean point error), ``plain`` (the same without the spheres in
+    the pose graph, the clouds alone; ``c2c`` when it had none), ``nav`` and
+    ``nav_max`` (navigation alone, the pre-alignment: mean and largest point error),
+    ``hausdorff_mean`` and
     ``hausdorff_sd`` (the nav + C2C cloud against the target-based one); or why not."""
     r = subprocess.run(
         [sys.executable, "-m", "phenorover", "eval", "register", str(run_dir)],
@@ -141,8 +146,10 @@ def registration(run_dir: Path) -> tuple[dict[str, float], str]:
     if not truth:
         return {}, "no truth files beside the scans"
     methods = truth["methods"]
+    plain = methods.get("c2c_without_targets", methods["c2c"])
     out = {
         "c2c": 100.0 * float(methods["c2c"]["points"]["mean"]),
+        "plain": 100.0 * float(plain["points"]["mean"]),
         "nav": 100.0 * float(methods["navigation"]["points"]["mean"]),
         "nav_max": 100.0 * float(methods["navigation"]["points"]["max"]),
     }
@@ -158,13 +165,17 @@ def registration(run_dir: Path) -> tuple[dict[str, float], str]:
     return out, ""
 
 
-def survey_manifest(manifest: Path, profile: str, tmp: Path) -> Path:
-    """``manifest`` with navigation ``profile``'s settings over its own (a file in
-    ``tmp``; the shipped one for ``ours``)."""
-    if profile == "ours":
+def survey_manifest(manifest: Path, profile: str, seed: int | None, tmp: Path) -> Path:
+    """``manifest`` with navigation ``profile``'s settings over its own and, with
+    ``seed``, another draw of the simulator's and receivers' noise (a file in ``tmp``;
+    the shipped one for ``ours`` without a seed)."""
+    if profile == "ours" and seed is None:
         return manifest
-    path = tmp / f"{manifest.stem}-{profile}.toml"
-    path.write_text(tomli_w.dumps(profiles.apply(read_toml(manifest), profile)))
+    m = profiles.apply(read_toml(manifest), profile)
+    if seed is not None:
+        m = profiles.seeded(m, seed)
+    path = tmp / f"{manifest.stem}-{profile}-{seed}.toml"
+    path.write_text(tomli_w.dumps(m))
     return path
 
 
@@ -193,74 +204,110 @@ def carry(bench: Bench, path: Path, names: list[str]) -> dict[str, dict[str, Any
     return out
 
 
-def measure(bench: Bench, name: str, manifest: Path, profile: str = "ours") -> dict[str, Any]:
-    """One survey on ``manifest`` under navigation ``profile`` and its figures; what
-    it measured, for the details."""
+def spread(values: list[float]) -> str:
+    """How the seeds' values of one figure spread (its note)."""
+    if len(values) < 2:
+        return ""
+    sd = statistics.stdev(values)
+    return f"mean of {len(values)} seeds, SD {sd:.3g}: " + ", ".join(f"{v:.3g}" for v in values)
+
+
+def one_survey(manifest: Path, profile: str, seed: int | None) -> dict[str, Any]:
+    """One survey and its scoring: its figures (see :func:`registration`), its true
+    stops and ``failed`` (why not, or empty)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        stats, why = survey(survey_manifest(manifest, profile, seed, Path(tmp)))
+    print(f"{profile} seed {seed}: {why or json.dumps(stats)}", flush=True)
+    reg, reg_why = ({}, why) if why else registration(Path(stats["run_dir"]))
+    run_dir = Path(stats["run_dir"]) if not why and "run_dir" in stats else None
+    stops = true_stops_cm(run_dir) if run_dir else []
+    return {**stats, **reg, "seed": seed, "true_stops_cm": stops, "failed": why or reg_why}
+
+
+def measure(
+    bench: Bench, name: str, manifest: Path, profile: str, seeds: list[int] | None
+) -> dict[str, Any]:
+    """The surveys on ``manifest`` under navigation ``profile``, one per seed (the
+    manifest's own draw when ``seeds`` is None), and their figures: each the mean over
+    the seeds that gave it, the seeds' values beside it. What they measured, for the
+    details: the means, and ``runs`` per seed."""
     try:
         models = from_manifest(manifest)
         field = load_manifest(manifest).field
     except ConfigError as exc:
         bench.fail(name, str(exc))
         return {"failed": str(exc)}
-    with tempfile.TemporaryDirectory() as tmp:
-        stats, why = survey(survey_manifest(manifest, profile, Path(tmp)))
-    print(f"{name}: {why or json.dumps(stats)}", flush=True)
-    reg, reg_why = ({}, why) if why else registration(Path(stats["run_dir"]))
-    if why:
-        bench.fail(name, why)
+    draws: list[int | None] = list(seeds) if seeds else [None]
+    runs = [one_survey(manifest, profile, seed) for seed in draws]
+    for r in runs:
+        if r["failed"]:
+            bench.fail(f"{name} seed {r['seed']}", r["failed"])
     what = f"{title(name, manifest)}, field {field}"
+    if seeds:
+        models = {**models, "seeds": f"surveys with seeds {', '.join(map(str, seeds))}"}
     baseline = profile == "paper"
+    means: dict[str, Any] = {}
 
-    def fig(label: str, value: float | None, unit: str, **kw: Any) -> None:
-        missing = why or reg_why
-        bench.figure(f"{what}: {label}", value, unit, missing=missing, error_models=models, **kw)
+    def fig(label: str, key: str, unit: str, note: str = "", **kw: Any) -> None:
+        vals = [float(r[key]) for r in runs if not r["failed"] and r.get(key) is not None]
+        value = statistics.mean(vals) if vals else None
+        if value is not None:
+            means[key] = value
+        note = "; ".join(n for n in (note, spread(vals)) if n)
+        why = "; ".join(r["failed"] for r in runs if r["failed"]) or "no survey measured it"
+        bench.figure(
+            f"{what}: {label}", value, unit, missing=why, error_models=models, note=note, **kw
+        )
 
-    fig("locations scanned", stats.get("scanned"), "", note=f"of {stats.get('total')}")
-    fig("wall time, services up to registration done", stats.get("wall_s"), "s")
-    fig("distance driven (measured, odometry)", stats.get("driven_m"), "m")
+    for r in runs:
+        r["true_stop_cm"] = statistics.mean(r["true_stops_cm"]) if r["true_stops_cm"] else None
+        r["scanned_share"] = r["scanned"] / r["total"] if r.get("total") else None
+    fig("locations scanned", "scanned", "", note=f"of {runs[0].get('total')}")
+    fig("wall time, services up to registration done", "wall_s", "s")
+    fig("distance driven (measured, odometry)", "driven_m", "m")
     fig(
         "nav + C2C: mean point error against the truth",
-        reg.get("c2c"),
+        "c2c",
         "cm",
+        note="the clouds alone, as the paper's C2C" if baseline else "spheres in the pose graph",
         goal=None if baseline else POINT_ERROR,
         headline=True,
     )
+    if not baseline:
+        fig("nav + C2C, the clouds alone: mean point error against the truth", "plain", "cm")
     for method, label in (("c2c", "nav + C2C"), ("target_based", "target-based")):
         for key in ("mean", "max"):
             fig(
                 f"{label}: {key} point error between overlapping scans (SCENE's scan point "
                 "statistics, the paper's metric; no truth)",
-                reg.get(f"overlap_{key}_{method}"),
+                f"overlap_{key}_{method}",
                 "cm",
                 paper=TABLE1[method][f"{key}_point_cm"] if baseline else None,
             )
-    fig(
-        "navigation alone (pre-alignment): mean point error against the truth", reg.get("nav"), "cm"
-    )
+    fig("navigation alone (pre-alignment): mean point error against the truth", "nav", "cm")
     fig(
         "navigation alone (pre-alignment): largest point error against the truth",
-        reg.get("nav_max"),
+        "nav_max",
         "cm",
         paper=PRE_ALIGNMENT_MAX_CM if baseline else None,
     )
     for key, label in (("mean", "mean"), ("sd", "SD")):
         fig(
             f"nav + C2C cloud against the target-based cloud: {label} distance",
-            reg.get(f"hausdorff_{key}"),
+            f"hausdorff_{key}",
             "cm",
             paper=HAUSDORFF[f"{key}_cm"] if baseline else None,
         )
-    run_dir = Path(stats["run_dir"]) if not why and "run_dir" in stats else None
-    stops = true_stops_cm(run_dir) if run_dir else []
+    stops = [v for r in runs for v in r["true_stops_cm"]]
     fig(
         "true stop at each scan against its planned location, mean",
-        statistics.mean(stops) if stops else None,
+        "true_stop_cm",
         "cm",
+        note=f"{len(stops)} scans, max {max(stops):.2f} cm" if stops else "",
         goal=None if baseline else TRUE_STOP,
         headline=True,
-        note=f"{len(stops)} scans, max {max(stops):.2f} cm" if stops else "",
     )
-    return {**stats, **reg, "true_stops_cm": stops, "failed": why}
+    return {**means, "runs": runs}
 
 
 TILT = (
@@ -328,6 +375,13 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--only", nargs="+", choices=sorted(SURVEYS), default=sorted(SURVEYS))
     ap.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=[1, 2, 3],
+        help="one survey per seed for sim and paper (hil: its manifest's draw, once)",
+    )
+    ap.add_argument(
         "--keep",
         action="store_true",
         help="the surveys not run keep their figures from the --json file",
@@ -335,7 +389,7 @@ def main() -> int:
     args = ap.parse_args()
     bench = Bench("bench_survey")
     details = {
-        name: measure(bench, name, manifest, profile)
+        name: measure(bench, name, manifest, profile, None if name == "hil" else args.seeds)
         for name, (manifest, profile) in SURVEYS.items()
         if name in args.only
     }

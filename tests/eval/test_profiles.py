@@ -11,6 +11,7 @@ import pytest
 from phenorover.eval import profiles
 from services.mission.config import MissionConfig
 from services.nav.config import NavConfig
+from services.register.config import RegisterRunConfig
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -28,6 +29,10 @@ def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> 
     assert mission.arrival_tolerance_m == nav.follower.arrival_tolerance_m == 0.25
     assert nav.follower.arrival_heading_tolerance_deg == 180.0
     assert nav.follower.heading_tolerance_deg == 2.0  # its corner turns keep the paper's
+    # its registration is the clouds' alone: the paper's C2C left the spheres out
+    reg = msgspec.convert(m["services"]["register"], RegisterRunConfig)
+    assert not reg.register.refine.use_targets
+    assert reg.register.refine.coarse_correspondence == 0.3
     # the manifest's own settings stay where the profile says nothing
     assert m["services"]["sim"] == shipped["services"]["sim"]
     assert profiles.apply(shipped, "ours") == shipped
