@@ -1,7 +1,8 @@
 """Fine positioning at a scan location, the route's end (pure; times in seconds).
 
-The robot stands ``fine_settle_s`` (the filter averages GNSS while the wheels are
-still), then creeps along its heading to within ``fine_tolerance_m`` of the goal and
+The robot stands ``fine_settle_s``, longer while the estimate's position SD is above
+``fine_settle_sd_m`` (at most ``fine_settle_max_s``: the filter averages GNSS while
+the wheels are still), then creeps along its heading to within ``fine_tolerance_m`` of the goal and
 turns slowly to within ``fine_heading_tolerance_deg`` of the planned heading,
 re-checking ``fine_resettle_s`` after each move. Creep speeds are low enough that the
 drivetrain's lag overshoots by well under the tolerances. The place comes first: a
@@ -30,11 +31,16 @@ class Fine:
         self._creep: tuple[str, float] | None = None  # ("v" | "w", sign) while creeping
         self._still_since = 0.0
         self._settle = cfg.fine_settle_s  # how long to stand before the next check
+        self._arriving = False  # this settle is an arrival's: it waits for the estimate
+        self.position_sd = 0.0  # the estimate's, m (the follower's caller keeps it)
+        self.waited = 0.0  # how long the last arrival's settle took, s
+        self.settled_sd = 0.0  # and the position SD it ended at, m
 
     def begin(self, t: float) -> None:
         """The robot stopped at the goal (first, or after coming in again): stand
         ``fine_settle_s`` before the first check."""
         self._still_since, self._settle = t, self.cfg.fine_settle_s
+        self._arriving = True
 
     def hold(self, t: float) -> None:
         """The robot is turning coarsely: the settle starts again once it stops."""
@@ -45,7 +51,15 @@ class Fine:
         return self._creep is not None
 
     def settled(self, t: float) -> bool:
-        return t - self._still_since >= self._settle
+        waited = t - self._still_since
+        if waited < self._settle:
+            return False
+        if self._arriving:
+            c = self.cfg
+            if self.position_sd > c.fine_settle_sd_m and waited < c.fine_settle_max_s:
+                return False
+            self._arriving, self.waited, self.settled_sd = False, waited, self.position_sd
+        return True
 
     def reapproach(self, t: float) -> bool:
         """Whether to back up and come in again now (settled, not creeping, budget
@@ -63,7 +77,10 @@ class Fine:
         return ok
 
     def summary(self) -> str:
-        return f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches"
+        return (
+            f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches; "
+            f"settled {self.waited:.0f} s to a position SD of {1000 * self.settled_sd:.1f} mm"
+        )
 
     def step(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
         """One step at the goal, ``rem`` metres short of it along the robot's heading

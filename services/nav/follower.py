@@ -141,10 +141,21 @@ class Follower:
         return max(0.0, along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)) + rest
 
     def step(
-        self, t: float, x: float, y: float, yaw: float, localized: bool, obstacle: bool
+        self,
+        t: float,
+        x: float,
+        y: float,
+        yaw: float,
+        localized: bool,
+        obstacle: bool,
+        position_sd: float = 0.0,
     ) -> Command:
+        """The command for the pose estimate (x, y, yaw) at ``t`` (s);
+        ``position_sd``: the estimate's position SD along its worse axis (m), which
+        the fine phase's settle waits on."""
         dt = 0.0 if self._t is None else max(0.0, min(t - self._t, 0.5))
         self._t = t
+        self.fine.position_sd = position_sd
         if not self.active or not self.legs:
             self._v = self._w = 0.0
             # how the route ended stays in every progress message after the end

@@ -43,10 +43,17 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     fine: bool = True
     fine_tolerance_m: Pos = 0.003
     fine_heading_tolerance_deg: Pos = 0.1
-    # stand this long on arrival (the estimate averages the fixes down), and this
-    # long after a creep or trim, which odometry carries without disturbing it
+    # stand at least this long on arrival (the estimate averages the fixes down), and
+    # this long after a creep or trim, which odometry carries without disturbing it
     fine_settle_s: Pos = 20.0
     fine_resettle_s: Pos = 2.0
+    # ... and on arrival until the estimate's position SD (its larger axis, the
+    # filter's own, which counts the fixes' correlation over seconds) is below this,
+    # at most ``fine_settle_max_s``: under the crop a fix wanders 2-3 cm for seconds
+    # at a time, and 20 s of them leave the estimate about a centimetre off, which
+    # the creeps would then faithfully drive the robot to
+    fine_settle_sd_m: Pos = 0.004
+    fine_settle_max_s: Pos = 90.0
     creep_speed: Pos = 0.01
     creep_turn_rate: Pos = 0.005
     # how long a creep command takes to show in the pose (drivetrain lag plus the

@@ -283,7 +283,11 @@ class NavService:
                 x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
                 localized = self._localized(t)
                 tilt = self.tilt.tilt(t)
-                cmd = self.follower.step(t, x[0], x[1], x[2], localized, self.obstacles.held)
+                # the position's SD along its worse axis, which the fine settle waits on
+                sd = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+                cmd = self.follower.step(
+                    t, x[0], x[1], x[2], localized, self.obstacles.held, position_sd=sd
+                )
                 active = self.follower.active
                 if cmd.v or cmd.w:
                     self._moving_until = t

@@ -4,6 +4,9 @@ with in-place corners ends at the goal, within the heading tolerance."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+
+import pytest
 
 from common.geo import wrap_angle
 from common.messages.nav import Leg, NavState
@@ -135,6 +138,27 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
     assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
     assert f.fine.reapproaches >= 1
+
+
+def test_the_arrival_settle_waits_for_the_estimate_to_settle() -> None:
+    """Standing at the goal, the fine phase moves only once the estimate's position
+    SD is below ``fine_settle_sd_m``, and at the latest after ``fine_settle_max_s``."""
+    cfg = FollowerConfig(fine_settle_s=20.0, fine_settle_sd_m=0.004, fine_settle_max_s=90.0)
+
+    def first_creep(sd_at: Callable[[float], float]) -> float:
+        f = Follower(cfg)
+        f.start("settle", [Leg(x0=0, y0=0, x1=2, y1=0)])
+        dt = 0.05
+        for k in range(int(120 / dt)):
+            t = k * dt
+            # 1 cm short of the goal, on the line: a creep is due once settled
+            if f.step(t, 1.99, 0.0, 0.0, True, False, position_sd=sd_at(t)).v:
+                return t
+        raise AssertionError("never crept")
+
+    assert first_creep(lambda t: 0.002) == pytest.approx(20.0, abs=0.1)
+    assert first_creep(lambda t: 0.010 if t < 47.0 else 0.003) == pytest.approx(47.0, abs=0.1)
+    assert first_creep(lambda t: 0.010) == pytest.approx(90.0, abs=0.1)
 
 
 def test_no_fine_positioning_when_disabled() -> None:
