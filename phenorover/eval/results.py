@@ -24,7 +24,7 @@ import os
 import platform
 import subprocess
 import sys
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal, TextIO
 
@@ -241,6 +241,19 @@ class Bench:
         )
         self.figures.append(fig)
         return fig
+
+    def carry(self, path: Path, prefixes: Sequence[str]) -> BenchResult | None:
+        """Keep the figures of the earlier results file ``path`` whose names begin
+        with one of ``prefixes``, each with its own date and commit (a benchmark run
+        again in part keeps the rest). Returns the earlier result, for its details;
+        None, said on stdout, when the file is missing or unreadable."""
+        try:
+            old = load(path)
+        except ResultError as exc:
+            print(f"--keep: {exc}", flush=True)
+            return None
+        self.figures.extend(f for f in old.figures if f.name.startswith(tuple(prefixes)))
+        return old
 
     def fail(self, experiment: str, reason: str) -> None:
         """Record an experiment that failed: the benchmark will exit non-zero."""

@@ -9,6 +9,11 @@ figure (the simulator as hard as the field); ours at most 0.6 x the baseline's m
 cross-track error; ours' true stop within 1.0 cm of the plan.
 
     python tests/bench/bench_profiles.py [--json OUT] [--seeds 1 2 3] [--rtf 10]
+        [--experiments border serpentine stationary] [--keep]
+
+``--keep`` carries the figures and runs of the experiments not run from the
+``--json`` file (each figure keeps its own date and commit), so one experiment can be
+run again alone.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from phenorover.eval.results import Bench, Goal
 from tests.bench.bench_nav import PLACED, models, run_experiment
 
 PROFILES = ("paper", "ours")
+EXPERIMENTS = ("border", "serpentine", "stationary")
 # (experiment, stats.json key, figure, unit, scale, the paper's field figure)
 METRICS = (
     ("border", "xte_mean_cm", "border: mean cross-track error, true pose", "cm", 1.0, 2.37),
@@ -76,10 +82,23 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--rtf", type=float, default=10.0)
-    ap.add_argument("--experiments", nargs="+", default=["border", "serpentine", "stationary"])
+    ap.add_argument("--experiments", nargs="+", choices=EXPERIMENTS, default=list(EXPERIMENTS))
+    ap.add_argument(
+        "--keep",
+        action="store_true",
+        help="the experiments not run keep their figures from the --json file",
+    )
     args = ap.parse_args()
     bench = Bench("bench_profiles")
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {p: {} for p in PROFILES}
+    if args.keep and args.json is not None:
+        kept = [e for e in EXPERIMENTS if e not in args.experiments]
+        old = bench.carry(args.json, [f"{e}:" for e in kept])
+        old_runs = old.details.get("runs", {}) if old is not None else {}
+        for profile in PROFILES:
+            for e in kept:
+                if e in old_runs.get(profile, {}):
+                    runs[profile][e] = old_runs[profile][e]
     with tempfile.TemporaryDirectory() as d:
         for exp in args.experiments:
             for profile in PROFILES:

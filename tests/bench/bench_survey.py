@@ -52,7 +52,7 @@ from phenorover.eval import profiles
 from phenorover.eval.error_models import from_manifest
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
 from phenorover.eval.register.truth import find_truth
-from phenorover.eval.results import Bench, Goal, ResultError, load
+from phenorover.eval.results import Bench, Goal
 
 REPO = Path(__file__).resolve().parents[2]
 # name -> (manifest, navigation profile)
@@ -189,19 +189,8 @@ def carry(bench: Bench, path: Path, names: list[str]) -> dict[str, dict[str, Any
     """The figures and details of surveys ``names`` from an earlier results file,
     each figure with its own date and commit (``--keep``); nothing when the file is
     missing or unreadable."""
-    try:
-        old = load(path)
-    except ResultError as exc:
-        print(f"--keep: {exc}", flush=True)
-        return {}
-    out = {}
-    for name in names:
-        begins = title(name, SURVEYS[name][0])
-        figures = [f for f in old.figures if f.name.startswith(begins + ",")]
-        if figures and name in old.details:
-            bench.figures.extend(figures)
-            out[name] = old.details[name]
-    return out
+    old = bench.carry(path, [title(n, SURVEYS[n][0]) + "," for n in names])
+    return {} if old is None else {n: old.details[n] for n in names if n in old.details}
 
 
 def spread(values: list[float]) -> str:

@@ -110,6 +110,25 @@ def test_the_printed_summary_gives_the_error_models_beside_the_figures() -> None
     assert "wheel slip: 1 % forward" in text
 
 
+def test_a_benchmark_run_in_part_keeps_the_rest_of_an_earlier_file(tmp_path: Path) -> None:
+    old = Bench("bench_p")
+    old.figure("border: xte", 1.4, "cm")
+    old.figure("stationary: stop", 1.2, "cm")
+    old.finish(tmp_path / "p.json", {"runs": {"ours": {"border": [1]}}}, out=quiet())
+    kept = load(tmp_path / "p.json").figures[0]
+
+    new = Bench("bench_p")
+    earlier = new.carry(tmp_path / "p.json", ["border:"])
+    new.figure("stationary: stop", 0.9, "cm")
+    assert earlier is not None and earlier.details["runs"] == {"ours": {"border": [1]}}
+    assert [(f.name, f.value) for f in new.figures] == [
+        ("border: xte", 1.4),
+        ("stationary: stop", 0.9),
+    ]
+    assert (new.figures[0].date, new.figures[0].commit) == (kept.date, kept.commit)
+    assert Bench("bench_p").carry(tmp_path / "none.json", ["border:"]) is None
+
+
 def test_loading_a_missing_or_older_file_says_so(tmp_path: Path) -> None:
     with pytest.raises(ResultError, match="is missing"):
         load(tmp_path / "none.json")
