@@ -84,7 +84,8 @@ TRUE_STOP = Goal(
 
 
 def survey(manifest: Path) -> tuple[dict[str, Any], str]:
-    """Run ``phenorover sim`` on ``manifest``: its summary figures, or why it failed."""
+    """Run ``phenorover sim`` on ``manifest``: its summary figures, or why it failed;
+    its output goes to ``sim.log`` in the survey's run folder."""
     t0 = time.monotonic()
     r = subprocess.run(
         [sys.executable, "-m", "phenorover", "sim", "--manifest", str(manifest)],
@@ -106,6 +107,8 @@ def survey(manifest: Path) -> tuple[dict[str, Any], str]:
         "wall_s": wall,
         "run_dir": str(REPO / run),
     }
+    # the services' logs beside the survey's files (each arrival's settle, say)
+    (REPO / run / "sim.log").write_text(r.stdout + r.stderr)
     if r.returncode != 0:
         said = [ln for ln in r.stdout.splitlines() if "not scanned" in ln or "failed" in ln]
         last = (said or r.stderr.strip().splitlines() or ["no output"])[-1]
