@@ -203,6 +203,11 @@ class Survey:
             # follow it a tick or two apart
             if p is not None and p.route_id == rid and p.stamp_ns >= sent - SKEW_NS:
                 if p.state == NavState.ARRIVED:
+                    # how it got there (how far off by the estimate, the fine phase's
+                    # moves) stays in the mission log
+                    self.event(
+                        "info", f"{rid}: arrived: {p.detail}" if p.detail else f"{rid}: arrived"
+                    )
                     return True, ""
                 if p.state == NavState.BLOCKED:
                     return False, "navigation blocked"

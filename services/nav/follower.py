@@ -269,6 +269,7 @@ class Follower:
                 return out(v, w, NavState.POSITIONING)
             c = self._arrive(out, x, y, ferr)
             c.detail += f" ({fine.summary()})"
+            self.end_detail = c.detail  # and in every progress message after it
             return c
         # FINAL: rotate in place to the next leg's heading
         if leg.final_yaw is not None:

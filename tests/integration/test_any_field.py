@@ -95,6 +95,7 @@ max_fix_age_s = 2.0
 # within the arrival tolerance, and a shorter settle saves minutes (the re-approach
 # stays: a route resumed after a pause can end centimetres to the side)
 fine_settle_s = 5.0
+fine_settle_max_s = 5.0
 # behaviour, not accuracy: the speed these surveys were timed at, twice the default
 max_speed = 0.3
 {follower}
