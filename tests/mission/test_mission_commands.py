@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -30,6 +31,22 @@ from tests.conftest import client
 TINY = Path(__file__).resolve().parents[1] / "data" / "tiny.toml"
 
 
+PROBE = "probe"  # a request HeldPlanner answers at once: the test's "are you there"
+
+
+def reachable(bus: Bus, timeout: float = 30.0) -> bool:
+    """Whether the planner answers through the router: its queryable reaches the
+    router some time after it is declared, and a query before then finds nobody."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            bus.call(keys.PLANNER_PLAN, PlanRequest(name=PROBE), timeout=2)
+            return True
+        except RpcError:
+            continue
+    return False
+
+
 class HeldPlanner:
     """Answers PLANNER_PLAN with the tiny field's plan once ``release`` is set."""
 
@@ -40,7 +57,9 @@ class HeldPlanner:
         self.release = threading.Event()
         bus.serve(keys.PLANNER_PLAN, self._plan)
 
-    def _plan(self, _req: PlanRequest) -> PlanResult:
+    def _plan(self, req: PlanRequest) -> PlanResult:
+        if req.name == PROBE:
+            return self.result
         self.asked.set()
         assert self.release.wait(30), "the test never released the planner"
         return self.result
@@ -72,6 +91,7 @@ def test_while_planning_a_second_start_is_refused_and_an_abort_is_obeyed(
         )
         service = MissionService(ctx, MissionConfig(register_on_done=False))
         first: list[MissionState | Exception] = []
+        assert reachable(client_bus), "the planner never answered through the router"
 
         def start() -> None:
             try:
