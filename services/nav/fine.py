@@ -35,6 +35,7 @@ class Fine:
         self.position_sd = 0.0  # the estimate's, m (the follower's caller keeps it)
         self.waited = 0.0  # how long the last arrival's settle took, s
         self.settled_sd = 0.0  # and the position SD it ended at, m
+        self.log: list[str] = []  # each move and what it was for, for the arrival's detail
 
     def begin(self, t: float) -> None:
         """The robot stopped at the goal (first, or after coming in again): stand
@@ -61,9 +62,9 @@ class Fine:
             self._arriving, self.waited, self.settled_sd = False, waited, self.position_sd
         return True
 
-    def reapproach(self, t: float) -> bool:
+    def reapproach(self, t: float, aside: float = 0.0) -> bool:
         """Whether to back up and come in again now (settled, not creeping, budget
-        left); counts it when so."""
+        left), ``aside`` metres off the leg; counts it when so."""
         c = self.cfg
         ok = (
             self._creep is None
@@ -74,12 +75,15 @@ class Fine:
         if ok:
             self.reapproaches += 1
             self.moves += 1
+            self.log.append(f"re-approach {1000 * aside:+.0f} mm aside")
         return ok
 
     def summary(self) -> str:
+        """What the fine phase did: its moves in order, and its last arrival's settle."""
+        moves = f"{', '.join(self.log)}; " if self.log else "no move; "
         return (
-            f"{self.moves} creeps, {self.turns} turns, {self.reapproaches} re-approaches; "
-            f"settled {self.waited:.0f} s to a position SD of {1000 * self.settled_sd:.1f} mm"
+            f"{moves}the last settle {self.waited:.0f} s, to a position SD of "
+            f"{1000 * self.settled_sd:.1f} mm"
         )
 
     def step(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
@@ -103,6 +107,7 @@ class Fine:
         if abs(rem) > c.fine_tolerance_m and self.moves < c.fine_moves:
             self._creep = ("v", math.copysign(1.0, rem))
             self.moves += 1
+            self.log.append(f"creep {1000 * rem:+.0f} mm")
         elif not self.placed:
             self.placed = True
             return 0.0, 0.0
@@ -111,6 +116,7 @@ class Fine:
         ):
             self._creep = ("w", math.copysign(1.0, -yaw_err))
             self.turns += 1
+            self.log.append(f"trim {math.degrees(-yaw_err):+.2f} deg")
         else:
             return 0.0, 0.0
         return self.step(t, rem, yaw_err)

@@ -253,7 +253,7 @@ class Follower:
                 along
                 and abs(xte) > self.cfg.reapproach_tolerance_m
                 and abs(herr) <= tol
-                and fine.reapproach(t)
+                and fine.reapproach(t, xte)
             ):
                 self.phase = Phase.BACKUP
                 self._backup_to = min(self.cfg.reapproach_m, _leg_len(leg))

@@ -4,6 +4,7 @@ with in-place corners ends at the goal, within the heading tolerance."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 
 import pytest
@@ -138,6 +139,9 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
     assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
     assert f.fine.reapproaches >= 1
+    # the arrival says what the fine phase did
+    assert re.search(r"re-approach [+-]10 mm aside", f.end_detail), f.end_detail
+    assert "the last settle" in f.end_detail
 
 
 def test_the_arrival_settle_waits_for_the_estimate_to_settle() -> None:
