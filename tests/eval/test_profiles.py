@@ -33,6 +33,7 @@ def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> 
     reg = msgspec.convert(m["services"]["register"], RegisterRunConfig)
     assert not reg.register.refine.use_targets
     assert reg.register.refine.coarse_correspondence == 0.3
+    assert reg.register.refine.nav_sigma_xy == 0.02
     # the manifest's own settings stay where the profile says nothing
     assert m["services"]["sim"] == shipped["services"]["sim"]
     assert profiles.apply(shipped, "ours") == shipped

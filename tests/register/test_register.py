@@ -121,7 +121,7 @@ def test_shared_spheres_tie_scans_in_the_pose_graph_without_any_pair():
         for i, t in enumerate(truth)
         for k in range(2)
     ]
-    cfg = RefineConfig()
+    cfg = RefineConfig(nav_sigma_xy=0.02)  # what these navigation poses are worth
     alone = optimise_graph(nav, [], prior_sigmas(cfg))
     tied = optimise_graph(nav, [], prior_sigmas(cfg), obs, 0.001)
 
@@ -151,7 +151,7 @@ def test_refinement_restores_a_perturbed_pair(lane_scans):
         perturb(t0, [0.02, -0.01, 0.03], np.radians([0.1, -0.1, 0.5])),
         perturb(t1, [-0.03, 0.02, -0.02], np.radians([-0.1, 0.1, -0.8])),
     ]
-    cfg = RefineConfig()
+    cfg = RefineConfig(nav_sigma_xy=0.02)  # navigation poses 2-3 cm off
     poses, pairs = refine([prepare(s.points, cfg) for s in (s0, s1)], nav, cfg)
     assert pairs[0].kept, pairs[0].reason
     sample = s1.points[::20]
