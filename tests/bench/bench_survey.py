@@ -77,9 +77,10 @@ POINT_ERROR = Goal(
 TRUE_STOP = Goal(
     "<=",
     1.0,
-    "the crop's correlated fix noise that the 20 s settle averages (about a centimetre "
-    "under the canopy, 2 s correlation): a settle that ends when the filter's position "
-    "sigma is below the tolerance rather than after a fixed time",
+    "the fine phase's last move: it settles until the filter's position SD is 4 mm, and "
+    "a re-approach or creep then lands on an estimate still that far off; where its "
+    "budget of moves runs out it stays where the last one left it (each arrival's moves "
+    "are in the mission log): a tighter fine_settle_sd_m, at minutes per scan",
 )
 
 
@@ -353,10 +354,10 @@ def compare(bench: Bench, details: dict[str, dict[str, Any]]) -> None:
             goal=Goal(
                 "<=",
                 0.5,
-                "our navigation-only placement is no better than the baseline's: the "
-                "isolated scans keep a heading from the compass under the crop (see the "
-                "nav + C2C figure), and in the simulator the baseline's C2C converges "
-                "onto the target-based poses, where the paper's stayed 0.7 cm above them",
+                "the scans that see no sphere and pair with no neighbour keep their "
+                "navigation pose, whose heading is the compass under the crop averaged "
+                "over the scan (0.2-0.7 deg): more spheres, or a heading reference that "
+                "stands still",
             ),
             headline=True,
         )
