@@ -41,14 +41,13 @@ TILT = (
     "the simulated ground); and the fix's noise under the crop averaged longer on arrival"
 )
 PLACED = (
-    "placing the robot on a better estimate: it was placed on an estimate of its "
-    "moment, and over the hold the estimate moved to where the robot stands (compare the "
-    "estimate against the plan and against the truth below). Driven in under the crop, "
-    "the estimate stays 1-2 cm off the truth through the 20 s settle, and each "
-    "re-approach lands about a centimetre to either side. A longer settle with side "
-    "trims carried by odometry was tried and not taken (CHANGELOG.md): on the loose "
-    "ground every trim of the heading moves the robot millimetres unseen. "
-    "Next: a lateral reference that stands still, the lidar's view of the plot edges"
+    "placing the robot on a better estimate: it is placed on the estimate of its moment "
+    "(settled until the filter's position SD is 4 mm, at most 90 s), and over the hold "
+    "the estimate moves to where the robot stands (compare the estimate against the "
+    "plan and against the truth below). Where the fine phase's budget of moves runs "
+    "out (6 moves, 2 re-approaches), the robot stays where the last one left it; the "
+    "arrival's detail lists the moves. Next: a tighter settle, or a lateral reference "
+    "that stands still, the lidar's view of the plot edges"
 )
 CORNERS = (
     "a tracker that closes the corner turn's sideways shift faster (yaw-rate feedback, "
