@@ -2,8 +2,8 @@
 
 The robot stands ``fine_settle_s``, longer while the estimate's position SD is above
 ``fine_settle_sd_m`` (at most ``fine_settle_max_s``: the filter averages GNSS while
-the wheels are still), then creeps along its heading to within ``fine_tolerance_m`` of the goal and
-turns slowly to within ``fine_heading_tolerance_deg`` of the planned heading,
+the wheels are still), then creeps along its heading to within ``fine_tolerance_m``
+of the goal and turns slowly to within ``fine_heading_tolerance_deg`` of the planned heading,
 re-checking ``fine_resettle_s`` after each move. Creep speeds are low enough that the
 drivetrain's lag overshoots by well under the tolerances. The place comes first: a
 skid-steer robot creeps only along its heading, so once turned to another planned
@@ -35,7 +35,7 @@ class Fine:
         self.position_sd = 0.0  # the estimate's, m (the follower's caller keeps it)
         self.waited = 0.0  # how long the last arrival's settle took, s
         self.settled_sd = 0.0  # and the position SD it ended at, m
-        self.log: list[str] = []  # each move and what it was for, for the arrival's detail
+        self.history: list[str] = []  # each move, for the arrival's detail
 
     def begin(self, t: float) -> None:
         """The robot stopped at the goal (first, or after coming in again): stand
@@ -75,12 +75,12 @@ class Fine:
         if ok:
             self.reapproaches += 1
             self.moves += 1
-            self.log.append(f"re-approach {1000 * aside:+.0f} mm aside")
+            self.history.append(f"re-approach {1000 * aside:+.0f} mm aside")
         return ok
 
     def summary(self) -> str:
         """What the fine phase did: its moves in order, and its last arrival's settle."""
-        moves = f"{', '.join(self.log)}; " if self.log else "no move; "
+        moves = f"{', '.join(self.history)}; " if self.history else "no move; "
         return (
             f"{moves}the last settle {self.waited:.0f} s, to a position SD of "
             f"{1000 * self.settled_sd:.1f} mm"
@@ -107,7 +107,7 @@ class Fine:
         if abs(rem) > c.fine_tolerance_m and self.moves < c.fine_moves:
             self._creep = ("v", math.copysign(1.0, rem))
             self.moves += 1
-            self.log.append(f"creep {1000 * rem:+.0f} mm")
+            self.history.append(f"creep {1000 * rem:+.0f} mm")
         elif not self.placed:
             self.placed = True
             return 0.0, 0.0
@@ -116,7 +116,7 @@ class Fine:
         ):
             self._creep = ("w", math.copysign(1.0, -yaw_err))
             self.turns += 1
-            self.log.append(f"trim {math.degrees(-yaw_err):+.2f} deg")
+            self.history.append(f"trim {math.degrees(-yaw_err):+.2f} deg")
         else:
             return 0.0, 0.0
         return self.step(t, rem, yaw_err)
