@@ -22,6 +22,7 @@ import datetime
 import math
 import os
 import platform
+import statistics
 import subprocess
 import sys
 from collections.abc import Mapping, Sequence
@@ -286,6 +287,14 @@ class Bench:
         if path is not None:
             write(res, path)
         return res.exit_code
+
+
+def spread(values: Sequence[float]) -> str:
+    """How the seeds' values of one figure spread, for its note ("" for fewer than 2)."""
+    if len(values) < 2:
+        return ""
+    sd = statistics.stdev(values)
+    return f"mean of {len(values)} seeds, SD {sd:.3g}: " + ", ".join(f"{v:.3g}" for v in values)
 
 
 def write(res: BenchResult, path: Path) -> None:

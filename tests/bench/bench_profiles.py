@@ -28,7 +28,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from phenorover.eval.results import Bench, Goal
+from phenorover.eval.results import Bench, Goal, spread
 from tests.bench.bench_nav import PLACED, models, run_experiment
 
 PROFILES = ("paper", "ours")
@@ -68,13 +68,6 @@ CALIBRATE = (
     "cross-track errors; the stationary figures follow the paper's stopping rule and "
     "heading metric, which the paper does not state (docs/simulation.md#calibration)"
 )
-
-
-def spread(values: list[float]) -> str:
-    if not values:
-        return "no seed measured"
-    sd = statistics.stdev(values) if len(values) > 1 else 0.0
-    return f"mean of {len(values)} seeds, SD {sd:.3g}: " + ", ".join(f"{v:.3g}" for v in values)
 
 
 def main() -> int:

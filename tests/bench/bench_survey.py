@@ -52,7 +52,7 @@ from phenorover.eval import profiles
 from phenorover.eval.error_models import from_manifest
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
 from phenorover.eval.register.truth import find_truth
-from phenorover.eval.results import Bench, Goal
+from phenorover.eval.results import Bench, Goal, spread
 
 REPO = Path(__file__).resolve().parents[2]
 # name -> (manifest, navigation profile)
@@ -195,14 +195,6 @@ def carry(bench: Bench, path: Path, names: list[str]) -> dict[str, dict[str, Any
     missing or unreadable."""
     old = bench.carry(path, [title(n, SURVEYS[n][0]) + "," for n in names])
     return {} if old is None else {n: old.details[n] for n in names if n in old.details}
-
-
-def spread(values: list[float]) -> str:
-    """How the seeds' values of one figure spread (its note)."""
-    if len(values) < 2:
-        return ""
-    sd = statistics.stdev(values)
-    return f"mean of {len(values)} seeds, SD {sd:.3g}: " + ", ".join(f"{v:.3g}" for v in values)
 
 
 def one_survey(manifest: Path, profile: str, seed: int | None) -> dict[str, Any]:

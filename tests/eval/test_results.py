@@ -20,6 +20,7 @@ from phenorover.eval.results import (
     Target,
     format_value,
     load,
+    spread,
     verdict,
 )
 from tests.bench import bench_nav
@@ -127,6 +128,11 @@ def test_a_benchmark_run_in_part_keeps_the_rest_of_an_earlier_file(tmp_path: Pat
     ]
     assert (new.figures[0].date, new.figures[0].commit) == (kept.date, kept.commit)
     assert Bench("bench_p").carry(tmp_path / "none.json", ["border:"]) is None
+
+
+def test_the_seeds_spread_is_said_beside_a_mean() -> None:
+    assert spread([1.0, 2.0, 3.0]) == "mean of 3 seeds, SD 1: 1, 2, 3"
+    assert spread([0.7]) == spread([]) == ""
 
 
 def test_loading_a_missing_or_older_file_says_so(tmp_path: Path) -> None:
