@@ -41,7 +41,7 @@ TILT = (
     "the simulated ground); and the fix's noise under the crop averaged longer on arrival"
 )
 PLACED = (
-    "placing the robot on a better estimate: it is placed on the estimate of its moment "
+    "placing the robot on a better estimate: it is placed on an estimate of its moment "
     "(settled until the filter's position SD is 4 mm, at most 90 s), and over the hold "
     "the estimate moves to where the robot stands (compare the estimate against the "
     "plan and against the truth below). Where the fine phase's budget of moves runs "
