@@ -284,7 +284,13 @@ class NavService:
                 localized = self._localized(t)
                 tilt = self.tilt.tilt(t)
                 # the position's SD along its worse axis, which the fine settle waits on
-                sd = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+                # (unknown, as inf, when the covariance is not finite: the settle waits)
+                var = (
+                    float(np.linalg.eigvalsh(cov[:2, :2])[-1])
+                    if np.isfinite(cov).all()
+                    else math.inf
+                )
+                sd = math.sqrt(max(var, 0.0))
                 cmd = self.follower.step(
                     t, x[0], x[1], x[2], localized, self.obstacles.held, position_sd=sd
                 )

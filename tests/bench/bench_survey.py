@@ -134,8 +134,8 @@ def registration(run_dir: Path) -> tuple[dict[str, float], str]:
     ``c2c`` (nav + C2C mean point error), ``plain`` (the same without the spheres in
     the pose graph, the clouds alone; ``c2c`` when it had none), ``nav`` and
     ``nav_max`` (navigation alone, the pre-alignment: mean and largest point error),
-    ``hausdorff_mean`` and
-    ``hausdorff_sd`` (the nav + C2C cloud against the target-based one); or why not."""
+    ``hausdorff_mean`` and ``hausdorff_sd`` (the nav + C2C cloud against the
+    target-based one); or why not."""
     r = subprocess.run(
         [sys.executable, "-m", "phenorover", "eval", "register", str(run_dir)],
         capture_output=True,
@@ -246,7 +246,6 @@ def measure(
 
     for r in runs:
         r["true_stop_cm"] = statistics.mean(r["true_stops_cm"]) if r["true_stops_cm"] else None
-        r["scanned_share"] = r["scanned"] / r["total"] if r.get("total") else None
     fig("locations scanned", "scanned", "", note=f"of {runs[0].get('total')}")
     fig("wall time, services up to registration done", "wall_s", "s")
     fig("distance driven (measured, odometry)", "driven_m", "m")
