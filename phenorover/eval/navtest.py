@@ -16,7 +16,6 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-import msgspec
 import numpy as np
 import tomli_w
 
@@ -239,10 +238,11 @@ def _stationary(
 ) -> dict[str, Any]:
     ox, oy = float(fld.origin_xy[0]), float(fld.origin_xy[1])
     goal = (float(fld.cross_lanes_x[-2]), float(fld.row_lanes_y[1]))
+    # the heading the robot comes in with, which the stationary figures are against
     goal_yaw = math.atan2(goal[1] - oy, 0.0)
+    # the last leg ends as the mission's legs to a scan location do: without a
+    # planned heading (services/planner/waypoints.py), the robot holds the leg's
     legs = ex.legs_through([(ox, oy), (goal[0], oy), goal])
-    # a scan location is held at a planned heading, as the mission's legs end
-    legs[-1] = msgspec.structs.replace(legs[-1], final_yaw=goal_yaw)
     _follow(bus, rec, legs, "stationary", timeout=600)
     with rec.lock:
         n_pose, n_truth = len(rec.poses), len(rec.truth)

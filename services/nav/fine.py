@@ -3,13 +3,19 @@
 The robot stands ``fine_settle_s``, longer while the estimate's position SD is above
 ``fine_settle_sd_m`` (at most ``fine_settle_max_s``: the filter averages GNSS while
 the wheels are still), then creeps along its heading to within ``fine_tolerance_m``
-of the goal and turns slowly to within ``fine_heading_tolerance_deg`` of the planned heading,
-re-checking ``fine_resettle_s`` after each move. Creep speeds are low enough that the
-drivetrain's lag overshoots by well under the tolerances. The place comes first: a
-skid-steer robot creeps only along its heading, so once turned to another planned
-heading it could no longer correct its place along the leg. A sideways offset, which
-no creep removes, is the follower's to drive out by backing up (:meth:`Fine.reapproach`
-says whether the budget allows one).
+of the goal, re-checking ``fine_resettle_s`` after each move. Creep speeds are low
+enough that the drivetrain's lag overshoots by well under the tolerances.
+
+Only where the route plans a heading at its end does the robot then turn slowly to
+within ``fine_heading_tolerance_deg`` of it, or of the estimate's own heading SD if
+that is larger: under the crop the compass wanders by more than the tolerance, and
+each trim is a turn in place, which shifts a skid-steer robot sideways. A scan
+location plans none (a 360 deg scan does not care), so there the robot keeps the
+heading it came in with. The place comes first: a skid-steer robot creeps only along
+its heading, so once turned to another planned heading it could no longer correct
+its place along the leg. A sideways offset, which no creep removes, is the
+follower's to drive out by backing up (:meth:`Fine.reapproach` says whether the
+budget allows one).
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ class Fine:
         self._settle = cfg.fine_settle_s  # how long to stand before the next check
         self._arriving = False  # this settle is an arrival's: it waits for the estimate
         self.position_sd = 0.0  # the estimate's, m (the follower's caller keeps it)
+        self.heading_sd = 0.0  # and its heading's, rad
         self.waited = 0.0  # how long the last arrival's settle took, s
         self.settled_sd = 0.0  # and the position SD it ended at, m
         self.history: list[str] = []  # each move, for the arrival's detail
@@ -86,14 +93,14 @@ class Fine:
             f"{1000 * self.settled_sd:.1f} mm"
         )
 
-    def step(self, t: float, rem: float, yaw_err: float) -> tuple[float, float]:
+    def step(self, t: float, rem: float, yaw_err: float | None) -> tuple[float, float]:
         """One step at the goal, ``rem`` metres short of it along the robot's heading
-        and ``yaw_err`` off the heading sought: (v, w) to creep with, or (0, 0) to
-        stand (settling, or done)."""
+        and ``yaw_err`` off the heading sought (None: no heading is sought, none is
+        trimmed): (v, w) to creep with, or (0, 0) to stand (settling, or done)."""
         c = self.cfg
         if self._creep is not None:
             kind, sign = self._creep
-            err = rem if kind == "v" else -yaw_err
+            err = rem if kind == "v" else -(yaw_err or 0.0)
             rate = c.creep_speed if kind == "v" else c.creep_turn_rate
             # aim at the goal itself, stopping early by what is still in the pipeline
             if sign * err > rate * c.creep_latency_s:
@@ -112,7 +119,9 @@ class Fine:
             self.placed = True
             return 0.0, 0.0
         elif (
-            abs(yaw_err) > math.radians(c.fine_heading_tolerance_deg) and self.turns < c.fine_moves
+            yaw_err is not None
+            and abs(yaw_err) > max(math.radians(c.fine_heading_tolerance_deg), self.heading_sd)
+            and self.turns < c.fine_moves
         ):
             self._creep = ("w", math.copysign(1.0, -yaw_err))
             self.turns += 1

@@ -149,13 +149,15 @@ class Follower:
         localized: bool,
         obstacle: bool,
         position_sd: float = 0.0,
+        heading_sd: float = 0.0,
     ) -> Command:
         """The command for the pose estimate (x, y, yaw) at ``t`` (s);
         ``position_sd``: the estimate's position SD along its worse axis (m), which
-        the fine phase's settle waits on."""
+        the fine phase's settle waits on; ``heading_sd`` (rad): no heading trim is
+        finer than it."""
         dt = 0.0 if self._t is None else max(0.0, min(t - self._t, 0.5))
         self._t = t
-        self.fine.position_sd = position_sd
+        self.fine.position_sd, self.fine.heading_sd = position_sd, heading_sd
         if not self.active or not self.legs:
             self._v = self._w = 0.0
             # how the route ended stays in every progress message after the end
@@ -262,7 +264,8 @@ class Follower:
             # the robot can only creep along its heading: the goal's offset that way
             ahead = (leg.x1 - x) * math.cos(yaw) + (leg.y1 - y) * math.sin(yaw)
             placed = fine.placed
-            v, w = fine.step(t, ahead, ferr)
+            # only a planned heading is trimmed to; the leg's own is held coarsely
+            v, w = fine.step(t, ahead, ferr if leg.final_yaw is not None else None)
             if fine.placed != placed:
                 return out(0.0, 0.0, NavState.POSITIONING)  # the heading's turn next
             if v or w or not fine.settled(t):

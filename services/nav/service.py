@@ -291,8 +291,16 @@ class NavService:
                     else math.inf
                 )
                 sd = math.sqrt(max(var, 0.0))
+                yaw_sd = math.sqrt(max(float(cov[2, 2]), 0.0)) if math.isfinite(var) else math.inf
                 cmd = self.follower.step(
-                    t, x[0], x[1], x[2], localized, self.obstacles.held, position_sd=sd
+                    t,
+                    x[0],
+                    x[1],
+                    x[2],
+                    localized,
+                    self.obstacles.held,
+                    position_sd=sd,
+                    heading_sd=yaw_sd,
                 )
                 active = self.follower.active
                 if cmd.v or cmd.w:

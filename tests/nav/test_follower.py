@@ -85,14 +85,14 @@ def test_no_motion_while_not_localized() -> None:
 
 
 def run_lagging(
-    f: Follower, x: float, y: float, yaw: float, seconds: float = 300.0
+    f: Follower, x: float, y: float, yaw: float, seconds: float = 300.0, heading_sd: float = 0.0
 ) -> tuple[float, float, float, list[str]]:
     """Close the loop around a unicycle whose wheels follow commands with a 0.15 s
     lag (which overshoots a plain stop by centimetres), until an event."""
     v = w = 0.0
     dt, tau = 0.05, 0.15
     for k in range(int(seconds / dt)):
-        c = f.step(k * dt, x, y, yaw, True, False)
+        c = f.step(k * dt, x, y, yaw, True, False, heading_sd=heading_sd)
         if c.event:
             return x, y, yaw, [c.event]
         v += (c.v - v) * (1 - math.exp(-dt / tau))
@@ -137,11 +137,29 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     x, y, yaw, events = run_lagging(f, 1.99, 0.01, 0.0)
     assert events == ["arrived"]
     assert abs(y) <= cfg.fine_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
-    assert abs(math.degrees(yaw)) <= cfg.fine_heading_tolerance_deg
+    # a scan location plans no heading: the one the robot came in with is kept
+    assert abs(math.degrees(yaw)) <= cfg.heading_tolerance_deg
+    assert "trim" not in f.end_detail, f.end_detail
     assert f.fine.reapproaches >= 1
     # the arrival says what the fine phase did
     assert re.search(r"re-approach [+-]10 mm aside", f.end_detail), f.end_detail
     assert "the last settle" in f.end_detail
+
+
+def test_a_planned_heading_is_trimmed_no_finer_than_the_estimate_knows_it() -> None:
+    """Arrived 0.5 deg off a planned heading: trimmed when the filter's heading SD is
+    below that, left as it is when the SD is 1 deg (the trim would chase noise)."""
+    cfg = FollowerConfig()
+    for sd_deg, trimmed in ((0.0, True), (1.0, False)):
+        f = Follower(cfg)
+        f.start("trim", [Leg(x0=0, y0=0, x1=2, y1=0, final_yaw=0.0)])
+        _, _, yaw, events = run_lagging(
+            f, 2.0, 0.0, math.radians(0.5), heading_sd=math.radians(sd_deg)
+        )
+        assert events == ["arrived"]
+        assert ("trim" in f.end_detail) is trimmed, f.end_detail
+        off = abs(math.degrees(yaw))
+        assert off <= cfg.fine_heading_tolerance_deg if trimmed else off == pytest.approx(0.5)
 
 
 def test_the_arrival_settle_waits_for_the_estimate_to_settle() -> None:
