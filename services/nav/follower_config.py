@@ -42,6 +42,8 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     # fine positioning at the route's end (the scan location)
     fine: bool = True
     fine_tolerance_m: Pos = 0.003
+    # trims to a planned heading (a scan location has none) stop this close to it, or
+    # within the filter's heading SD when that is larger
     fine_heading_tolerance_deg: Pos = 0.1
     # stand at least this long on arrival (the estimate averages the fixes down), and
     # this long after a creep or trim, which odometry carries without disturbing it
