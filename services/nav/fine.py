@@ -22,7 +22,20 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+import numpy.typing as npt
+
 from services.nav.follower_config import FollowerConfig
+
+
+def pose_sds(cov: npt.NDArray[np.float64]) -> tuple[float, float]:
+    """The SDs the fine phase works to, from the (x, y, yaw) covariance: the
+    position's along its worse axis (m) and the heading's (rad); both unknown, as inf,
+    when the covariance is not finite, so the settle waits and no trim is made."""
+    if not np.isfinite(cov).all():
+        return math.inf, math.inf
+    var = float(np.linalg.eigvalsh(cov[:2, :2])[-1])
+    return math.sqrt(max(var, 0.0)), math.sqrt(max(float(cov[2, 2]), 0.0))
 
 
 class Fine:

@@ -32,6 +32,7 @@ from common.service import Context
 from common.status import parse_token
 from services.nav.config import Mounts, NavConfig, check_limits
 from services.nav.ekf import Localizer
+from services.nav.fine import pose_sds
 from services.nav.follower import Follower
 from services.nav.gyro import Gyro
 from services.nav.obstacles import ObstacleWatch, hits_ahead, hits_on_leg
@@ -283,24 +284,9 @@ class NavService:
                 x, cov = self.loc.x.copy(), self.loc.P[:3, :3].copy()
                 localized = self._localized(t)
                 tilt = self.tilt.tilt(t)
-                # the position's SD along its worse axis, which the fine settle waits on
-                # (unknown, as inf, when the covariance is not finite: the settle waits)
-                var = (
-                    float(np.linalg.eigvalsh(cov[:2, :2])[-1])
-                    if np.isfinite(cov).all()
-                    else math.inf
-                )
-                sd = math.sqrt(max(var, 0.0))
-                yaw_sd = math.sqrt(max(float(cov[2, 2]), 0.0)) if math.isfinite(var) else math.inf
+                sd, yaw_sd = pose_sds(cov)
                 cmd = self.follower.step(
-                    t,
-                    x[0],
-                    x[1],
-                    x[2],
-                    localized,
-                    self.obstacles.held,
-                    position_sd=sd,
-                    heading_sd=yaw_sd,
+                    t, x[0], x[1], x[2], localized, self.obstacles.held, sd, yaw_sd
                 )
                 active = self.follower.active
                 if cmd.v or cmd.w:

@@ -7,10 +7,12 @@ import math
 import re
 from collections.abc import Callable
 
+import numpy as np
 import pytest
 
 from common.geo import wrap_angle
 from common.messages.nav import Leg, NavState
+from services.nav.fine import pose_sds
 from services.nav.follower import Command, Follower, FollowerConfig
 
 
@@ -208,3 +210,10 @@ def test_arrival_checks_the_heading_with_its_own_tolerance() -> None:
     loose.start("r", [leg])
     assert loose._arrive(out, 1.0, 0.0, math.radians(5.0)).state == NavState.ARRIVED
     assert loose._arrive(out, 1.1, 0.0, 0.0).state == NavState.FAILED  # 10 cm off
+
+
+def test_the_fine_phase_reads_the_worse_axis_and_an_unknown_covariance_as_infinite() -> None:
+    cov = np.diag([1e-6, 16e-6, 1e-4])
+    assert pose_sds(cov) == pytest.approx((0.004, 0.01))
+    cov[2, 2] = math.nan
+    assert pose_sds(cov) == (math.inf, math.inf)
