@@ -63,11 +63,20 @@ METRICS = (
         None,
     ),
 )
-CALIBRATE = (
-    "the calibration (RTK under the crop, the southern paths' loose ground) matches the "
-    "cross-track errors; the stationary figures follow the paper's stopping rule and "
-    "heading metric, which the paper does not state (docs/simulation.md#calibration)"
+# what would close a calibration figure that misses, by experiment
+TRACK_CALIBRATE = (
+    "the error models (RTK under the crop, the southern paths' loose ground) were set "
+    "against these cross-track figures, but runs of one seed differ by several "
+    "millimetres: the simulated world runs beside the services, not in lockstep with "
+    "them, so thread timing changes each run. More runs per seed, or a lockstep clock, "
+    "would say whether a miss is the models or the draw (docs/simulation.md#calibration)"
 )
+CALIBRATE = {
+    "border": TRACK_CALIBRATE,
+    "serpentine": TRACK_CALIBRATE,
+    "stationary": "the stationary figures follow the paper's stopping rule and heading "
+    "metric, which the paper does not state (docs/simulation.md#calibration)",
+}
 
 
 def main() -> int:
@@ -134,7 +143,7 @@ def main() -> int:
                 f"{name}: the paper's method in our sim against the paper's field figure",
                 100.0 * abs(base - paper) / paper,
                 "%",
-                goal=Goal("<=", 25.0, CALIBRATE),
+                goal=Goal("<=", 25.0, CALIBRATE[exp]),
                 note=f"{base:.3g} {unit} against {paper} {unit}",
             )
         if key == "xte_mean_cm" and base and ours is not None:
