@@ -297,6 +297,29 @@ def spread(values: Sequence[float]) -> str:
     return f"mean of {len(values)} seeds, SD {sd:.3g}: " + ", ".join(f"{v:.3g}" for v in values)
 
 
+def seed_runs(by_seed: Sequence[Sequence[float]]) -> tuple[list[float], str]:
+    """Each seed's mean over its runs, and the note for the mean of those means.
+
+    With one run per seed the note is :func:`spread`'s. With several it also says how
+    far runs of one seed differ (their SD, pooled over the seeds): a simulated run is
+    not repeatable (docs/simulation.md#calibration), and that SD is what thread timing
+    alone moves one run's figure by."""
+    seeds = [list(v) for v in by_seed if v]
+    means = [statistics.mean(v) for v in seeds]
+    n = max((len(v) for v in seeds), default=0)
+    if n < 2:
+        return means, spread(means)
+    within = [statistics.variance(v) for v in seeds if len(v) > 1]
+    pooled = math.sqrt(statistics.mean(within))
+    head = f"mean of {len(means)} seeds x {n} runs"
+    if len(means) > 1:
+        head += f", SD {statistics.stdev(means):.3g} over the seeds' means"
+    return means, (
+        f"{head}: " + ", ".join(f"{v:.3g}" for v in means) + f"; SD {pooled:.3g} between "
+        "runs of one seed"
+    )
+
+
 def write(res: BenchResult, path: Path) -> None:
     """Write ``res`` to ``path`` atomically (a reader never sees half a file)."""
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -8,8 +8,12 @@ Targets (the calibration issue's acceptance): the baseline within 25 % of each p
 figure (the simulator as hard as the field); ours at most 0.6 x the baseline's mean
 cross-track error; ours' true stop within 1.0 cm of the plan.
 
-    python tests/bench/bench_profiles.py [--json OUT] [--seeds 1 2 3] [--rtf 10]
-        [--experiments border serpentine stationary] [--keep]
+    python tests/bench/bench_profiles.py [--json OUT] [--seeds 1 2 3] [--runs 1]
+        [--rtf 10] [--experiments border serpentine stationary] [--keep]
+
+``--runs N`` runs each seed N times: a simulated run is not repeatable to the
+millimetre (the world is not in lockstep with the services), so a figure is the mean
+of the seeds' means, and its note says how far runs of one seed differ.
 
 ``--keep`` carries the figures and runs of the experiments not run from the
 ``--json`` file (each figure keeps its own date and commit), so one experiment can be
@@ -19,6 +23,7 @@ run again alone.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import statistics
 import sys
@@ -28,7 +33,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from phenorover.eval.results import Bench, Goal, spread
+from phenorover.eval.results import Bench, Goal, seed_runs
 from tests.bench.bench_nav import PLACED, models, run_experiment
 
 PROFILES = ("paper", "ours")
@@ -83,6 +88,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument(
+        "--runs", type=int, default=1, help="runs of each seed (a run is not repeatable)"
+    )
     ap.add_argument("--rtf", type=float, default=10.0)
     ap.add_argument("--experiments", nargs="+", choices=EXPERIMENTS, default=list(EXPERIMENTS))
     ap.add_argument(
@@ -93,10 +101,13 @@ def main() -> int:
     args = ap.parse_args()
     bench = Bench("bench_profiles")
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {p: {} for p in PROFILES}
+    per_seed = {e: args.runs for e in args.experiments}
     if args.keep and args.json is not None:
         kept = [e for e in EXPERIMENTS if e not in args.experiments]
         old = bench.carry(args.json, [f"{e}:" for e in kept])
         old_runs = old.details.get("runs", {}) if old is not None else {}
+        old_per_seed = old.details.get("runs_per_seed", {}) if old is not None else {}
+        per_seed |= {e: old_per_seed.get(e, 1) for e in kept}
         for profile in PROFILES:
             for e in kept:
                 if e in old_runs.get(profile, {}):
@@ -104,23 +115,28 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as d:
         for exp in args.experiments:
             for profile in PROFILES:
-                for seed in args.seeds:
-                    out = Path(d) / f"{exp}-{profile}-{seed}"
+                for seed, run in itertools.product(args.seeds, range(1, args.runs + 1)):
+                    out = Path(d) / f"{exp}-{profile}-{seed}-{run}"
                     stats, why = run_experiment(exp, args.rtf, out, profile, seed)
-                    print(f"{exp} {profile} seed {seed}: {why or json.dumps(stats)}", flush=True)
+                    name = f"{exp} {profile} seed {seed}" + (f" run {run}" if args.runs > 1 else "")
+                    print(f"{name}: {why or json.dumps(stats)}", flush=True)
                     if why:
-                        bench.fail(f"{exp} {profile} seed {seed}", why)
+                        bench.fail(name, why)
                     # a route that ended off its goal (the baseline has no fine
                     # positioning) was still driven: its track errors count
                     if stats is not None:
-                        runs[profile].setdefault(exp, []).append(stats)
+                        runs[profile].setdefault(exp, []).append(stats | {"seed": seed, "run": run})
                     bench.error_models = models(out)
     means: dict[tuple[str, str], float] = {}
     for exp, key, name, unit, scale, paper in METRICS:
         if exp not in args.experiments:
             continue
         for profile in PROFILES:
-            vals = [scale * s[key] for s in runs[profile].get(exp, []) if key in s]
+            by_seed: dict[Any, list[float]] = {}
+            for i, s in enumerate(runs[profile].get(exp, [])):
+                if key in s:  # runs kept from before --runs carry no seed: one each
+                    by_seed.setdefault(s.get("seed", f"#{i}"), []).append(scale * s[key])
+            vals, note = seed_runs(list(by_seed.values()))
             value = statistics.mean(vals) if vals else None
             if value is not None:
                 means[(profile, name)] = value
@@ -134,7 +150,7 @@ def main() -> int:
                 goal=goal,
                 headline=True,
                 paper=paper,
-                note=spread(vals),
+                note=note,
                 missing="every seed failed",
             )
         base, ours = means.get(("paper", name)), means.get(("ours", name))
@@ -162,7 +178,8 @@ def main() -> int:
                 ),
                 headline=True,
             )
-    return bench.finish(args.json, {"seeds": args.seeds, "runs": runs})
+    details = {"seeds": args.seeds, "runs_per_seed": per_seed, "runs": runs}
+    return bench.finish(args.json, details)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from phenorover.eval.results import (
     Target,
     format_value,
     load,
+    seed_runs,
     spread,
     verdict,
 )
@@ -133,6 +134,19 @@ def test_a_benchmark_run_in_part_keeps_the_rest_of_an_earlier_file(tmp_path: Pat
 def test_the_seeds_spread_is_said_beside_a_mean() -> None:
     assert spread([1.0, 2.0, 3.0]) == "mean of 3 seeds, SD 1: 1, 2, 3"
     assert spread([0.7]) == spread([]) == ""
+
+
+def test_several_runs_of_a_seed_are_averaged_and_their_spread_said() -> None:
+    means, note = seed_runs([[1.0, 3.0], [2.0, 2.0], [4.0, 6.0]])
+    assert means == [2.0, 2.0, 5.0]
+    # pooled SD of the runs: variances 2, 0, 2 -> sqrt(4/3)
+    assert note == (
+        "mean of 3 seeds x 2 runs, SD 1.73 over the seeds' means: 2, 2, 5; "
+        "SD 1.15 between runs of one seed"
+    )
+    # one run per seed reads as before
+    assert seed_runs([[1.0], [2.0], [3.0]]) == ([1.0, 2.0, 3.0], spread([1.0, 2.0, 3.0]))
+    assert seed_runs([[], [2.5, 3.5]])[0] == [3.0]
 
 
 def test_loading_a_missing_or_older_file_says_so(tmp_path: Path) -> None:
