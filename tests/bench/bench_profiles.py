@@ -70,11 +70,10 @@ METRICS = (
 )
 # what would close a calibration figure that misses, by experiment
 TRACK_CALIBRATE = (
-    "the error models (RTK under the crop, the southern paths' loose ground) were set "
-    "against these cross-track figures, but runs of one seed differ by several "
-    "millimetres: the simulated world runs beside the services, not in lockstep with "
-    "them, so thread timing changes each run. More runs per seed, or a lockstep clock, "
-    "would say whether a miss is the models or the draw (docs/simulation.md#calibration)"
+    "runs of one seed differ by several millimetres (the simulated world is not in "
+    "lockstep with the services, docs/simulation.md#calibration): more runs per seed "
+    "(--runs) narrow the mean; a miss that stays is the error models (RTK under the "
+    "crop, the southern paths' loose ground), to be set again and every figure re-run"
 )
 CALIBRATE = {
     "border": TRACK_CALIBRATE,
