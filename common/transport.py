@@ -1,7 +1,7 @@
 """Typed publish/subscribe/query over one Zenoh session.
 
 Only this module (and the service runner) touch Zenoh's API. Messages are msgpack
-encoded by msgspec, one reused Encoder and one Decoder per type. A message that
+encoded by msgspec (:mod:`common.codec`). A message that
 fails to decode is logged once per key with the reason, counted, and dropped: a bad
 peer cannot crash a service. A subscriber callback or RPC handler that raises is
 treated the same way (first traceback per key logged, every one counted): a stream of
@@ -21,10 +21,10 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Generic, TypeVar
 
 import msgspec
-import numpy as np
 import zenoh
 import zenoh.ext
 
+from common.codec import DecodeStats, decode, encode
 from common.keys import ALIVE_ALL, Rpc, Topic
 
 M = TypeVar("M")
@@ -34,31 +34,6 @@ R = TypeVar("R")
 log = logging.getLogger(__name__)
 # how often a history topic's publisher announces its last sequence number (s)
 HEARTBEAT_S = 0.5
-
-
-def _enc_hook(obj: Any) -> Any:
-    # numpy scalars reach messages from every numeric core; send them as Python numbers
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise NotImplementedError(f"cannot encode objects of type {type(obj).__name__}")
-
-
-_ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
-_DECODERS: dict[Any, msgspec.msgpack.Decoder[Any]] = {}
-_DECODERS_LOCK = threading.Lock()
-
-
-def encode(msg: Any) -> bytes:
-    return _ENCODER.encode(msg)
-
-
-def decode(data: bytes, type_: Any) -> Any:
-    """Decode ``data`` as ``type_``; raises msgspec.DecodeError/ValidationError."""
-    dec = _DECODERS.get(type_)
-    if dec is None:
-        with _DECODERS_LOCK:
-            dec = _DECODERS.setdefault(type_, msgspec.msgpack.Decoder(type_))
-    return dec.decode(data)
 
 
 class RpcError(RuntimeError):
@@ -71,31 +46,6 @@ class RpcTimeout(RpcError):
 
 class RequestError(ValueError):
     """Raised by an RPC handler to answer with an error reply instead of a result."""
-
-
-class DecodeStats:
-    """Counts of failures per key (messages dropped because they did not decode, or
-    callbacks that raised), with the latest one as a line and its wall time."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.by_key: dict[str, int] = {}
-        self.last_error = ""
-        self.last_ns = 0  # wall time of the latest failure, 0 before any
-
-    @property
-    def total(self) -> int:
-        with self._lock:
-            return sum(self.by_key.values())
-
-    def record(self, key: str, reason: str) -> bool:
-        """Count one failure; True when it is the first on this key (log it then)."""
-        with self._lock:
-            n = self.by_key.get(key, 0)
-            self.by_key[key] = n + 1
-            self.last_error = f"{key}: {reason}"
-            self.last_ns = time.time_ns()
-            return n == 0
 
 
 class Latest(Generic[M]):
@@ -152,7 +102,7 @@ class Publisher(Generic[M]):
             raise TypeError(
                 f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
             )
-        self._pub.put(_ENCODER.encode(msg))
+        self._pub.put(encode(msg))
 
 
 class Bus:
@@ -272,7 +222,7 @@ class Bus:
                     self._failed(key, "handler")
                     query.reply_err(f"internal error in {self.name}: {exc!r}".encode())
                     return
-                query.reply(query.key_expr, _ENCODER.encode(rep))
+                query.reply(query.key_expr, encode(rep))
             finally:
                 query.drop()
 
@@ -287,7 +237,7 @@ class Bus:
         Raises RpcError with the service's reason on an error reply, RpcTimeout when
         nobody answers within ``timeout`` seconds.
         """
-        replies = self.session.get(rpc.key, payload=_ENCODER.encode(request), timeout=timeout)
+        replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout)
         for reply in replies:
             if reply.ok is not None:
                 try:

@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from common import keys
+from common.codec import decode, encode
 from common.messages.core import Array, Message
-from common.transport import decode, encode
 from tests.strategies import strategy_for
 
 WIRE_TYPES = sorted(

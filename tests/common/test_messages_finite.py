@@ -16,8 +16,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common import keys
+from common.codec import decode
 from common.messages.core import FINITE_MAX, Finite
-from common.transport import decode
 
 Path = tuple[str | int, ...]
 

@@ -24,6 +24,7 @@ import zenoh
 from common import keys
 from common.client import wait_alive
 from common.clock import NS
+from common.codec import decode
 from common.config import zenoh_config
 from common.messages.base import Imu, LaserScan, Odometry
 from common.messages.gnss import GnssHeading, NavSatFix
@@ -31,7 +32,7 @@ from common.messages.mission import MissionStart
 from common.messages.nav import CancelRoute, FollowRoute, Leg
 from common.messages.sim import SimClock
 from common.messages.system import Ping, Pong
-from common.transport import Bus, RpcError, decode
+from common.transport import Bus, RpcError
 from tests.conftest import Procs
 
 FUZZ_S = 5.0
