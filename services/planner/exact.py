@@ -7,9 +7,9 @@ before it, within the range limits and the field of view.
 When every plot stands on the ground and reaches the optical centre (plants taller than
 the scanner, the paper's case), occlusion is planar: a line of sight is blocked exactly
 when its ground projection crosses a plot at least as tall as both ends. The kernels
-then skip plots and sides that one box hides, and decide a whole column of sample points
-with one horizontal ray; the table is identical to testing every point in 3D (a test
-checks that), at a fraction of the rays.
+then skip plots and sides that one box hides (:mod:`services.planner.occlusion`) and
+decide a whole column of sample points with one horizontal ray; the table is identical
+to testing every point in 3D (a test checks that), at a fraction of the rays.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
-from common.field import Field
-from services.planner.raycast import GridArgs, Table, _slab, cell_of, first_hit
+from services.planner.occlusion import plot_hidden, side_hidden
+from services.planner.raycast import GridArgs, Table, cell_of, first_hit
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -29,102 +29,6 @@ I64 = npt.NDArray[np.int64]
 # the scanner's limits as the kernels take them: (min range, max range, vertical start
 # and end, horizontal start, horizontal span), metres and degrees
 Limits = tuple[float, float, float, float, float, float]
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _seg_hits(b: int, ox: float, oy: float, cx: float, cy: float, boxes: F64) -> bool:
-    """Whether the segment from o to just short of c crosses box b's footprint."""
-    dx, dy = cx - ox, cy - oy
-    a0, a1 = _slab(boxes[b, 0], boxes[b, 3], ox, 1.0 / dx, dx)
-    b0, b1 = _slab(boxes[b, 1], boxes[b, 4], oy, 1.0 / dy, dy)
-    return max(a0, b0, 0.0) <= min(a1, b1, 1.0 - 1e-9)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _one_box_hides(
-    o: F64, p: int, ex0: float, ey0: float, ex1: float, ey1: float, grid: GridArgs
-) -> int:
-    """The box that the horizontal rays from o to (ex0, ey0) and to (ex1, ey1) both hit
-    first, when it is at least as tall as plot p; else -1. Under planar occlusion that
-    (convex) box cuts every line of sight between the two rays, over p's whole height."""
-    boxes = grid[0]
-    hit = -1
-    for e in range(2):
-        ex, ey = (ex0, ey0) if e == 0 else (ex1, ey1)
-        dx, dy = ex - o[0], ey - o[1]
-        d = math.sqrt(dx * dx + dy * dy)
-        if d < 1e-9:
-            return -1
-        b, _ = first_hit(o[0], o[1], o[2], dx / d, dy / d, 0.0, d * (1.0 - 1e-9) - 1e-7, grid)
-        if b < 0 or b == p or (e == 1 and b != hit) or boxes[b, 5] < boxes[p, 5]:
-            return -1
-        hit = b
-    return hit
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _plot_hidden(
-    o: F64,
-    p: int,
-    last: int,
-    grid: GridArgs,
-) -> int:
-    """Box that hides all of plot p under planar occlusion, or -1.
-
-    The lines of sight to the two silhouette corners of p's footprint must both cross
-    the same box B, at least as tall as p; B, convex and disjoint from p, then cuts the
-    whole wedge in front of p. ``last`` (the previous blocker) is tried first without
-    casting, since far plots tend to hide behind the same near one.
-    """
-    boxes = grid[0]
-    cx = 0.5 * (boxes[p, 0] + boxes[p, 3]) - o[0]
-    cy = 0.5 * (boxes[p, 1] + boxes[p, 4]) - o[1]
-    lo, hi = math.inf, -math.inf
-    k_lo, k_hi = 0, 0
-    for k in range(4):
-        vx = boxes[p, 0 if k < 2 else 3] - o[0]
-        vy = boxes[p, 1 if k % 2 == 0 else 4] - o[1]
-        ang = math.atan2(cx * vy - cy * vx, cx * vx + cy * vy)
-        if ang < lo:
-            lo, k_lo = ang, k
-        if ang > hi:
-            hi, k_hi = ang, k
-    if hi - lo >= math.pi:
-        return -1  # o is inside or on the footprint
-    ex = (boxes[p, 0 if k_lo < 2 else 3], boxes[p, 0 if k_hi < 2 else 3])
-    ey = (boxes[p, 1 if k_lo % 2 == 0 else 4], boxes[p, 1 if k_hi % 2 == 0 else 4])
-    if (
-        last >= 0
-        and last != p
-        and boxes[last, 5] >= boxes[p, 5]
-        and _seg_hits(last, o[0], o[1], ex[0], ey[0], boxes)
-        and _seg_hits(last, o[0], o[1], ex[1], ey[1], boxes)
-    ):
-        return last
-    return _one_box_hides(o, p, ex[0], ey[0], ex[1], ey[1], grid)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _side_hidden(
-    o: F64,
-    p: int,
-    ax: int,
-    plane: float,
-    grid: GridArgs,
-) -> bool:
-    """Whether one box hides the whole vertical side ``ax``/``plane`` of plot ``p``.
-
-    Valid only when every box stands on the ground and reaches the scanner height: then
-    occlusion is planar, and if the horizontal rays to both ends of the side hit the same
-    (convex) box B first, B cuts every line of sight to the side; B must also be at
-    least as tall as the plot so lines of sight to its top are cut too.
-    """
-    boxes = grid[0]
-    if ax == 0:
-        ex0, ey0, ex1, ey1 = plane, boxes[p, 1], plane, boxes[p, 4]
-    else:
-        ex0, ey0, ex1, ey1 = boxes[p, 0], plane, boxes[p, 3], plane
-    return _one_box_hides(o, p, ex0, ey0, ex1, ey1, grid) >= 0
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -323,7 +227,7 @@ def exact_kernel(
             if gx * gx + gy * gy + gz * gz > rmax * rmax:
                 continue
             if cull:
-                blocker = _plot_hidden(o, p, last, grid)
+                blocker = plot_hidden(o, p, last, grid)
                 if blocker >= 0:
                     last = blocker
                     continue
@@ -336,7 +240,7 @@ def exact_kernel(
                 plane = boxes[p, ax + 3] if sg > 0 else boxes[p, ax]
                 if sg * (o[ax] - plane) <= 1e-9:
                     continue  # the side looks away from the scanner
-                if cull and ax < 2 and _side_hidden(o, p, ax, plane, grid):
+                if cull and ax < 2 and side_hidden(o, p, ax, plane, grid):
                     continue
                 if cull and ax < 2:
                     nrays[a] += _planar_side(
@@ -375,34 +279,3 @@ def exact_kernel(
                                 out,
                             )
     return nrays
-
-
-def exposed_faces(field: Field) -> tuple[F64, I64, I64]:
-    """The cell faces on the surface of each plot (the ground face only when the plot
-    floats above the ground), grouped by plot: ``faces`` (F, 5) = plane, u0, u1, v0,
-    v1 with (u, v) the two other axes in cyclic order; ``fint`` (F, 4) = plot, cell,
-    axis, outward sign; ``side_start`` (6P + 1,) starts of the faces of side
-    ``axis * 2 + (sign > 0)`` of each plot."""
-    cb, dims = field.cell_boxes, field.cell_dims
-    rows_f: list[F64] = []
-    rows_i: list[I64] = []
-    counts = np.zeros(6 * field.n_plots, dtype=np.int64)
-    for p in range(field.n_plots):
-        lo, hi = int(field.cell_offset[p]), int(field.cell_offset[p + 1])
-        idx = np.arange(lo, hi)
-        loc = np.stack(np.unravel_index(idx - lo, tuple(dims[p])), axis=1)
-        for ax in range(3):
-            ua, va = (ax + 1) % 3, (ax + 2) % 3
-            for sign in (-1, 1):
-                if ax == 2 and sign == -1 and field.plot_boxes[p, 2] <= 0.0:
-                    continue  # on the ground: its underside cannot be seen
-                on = loc[:, ax] == (0 if sign < 0 else dims[p, ax] - 1)
-                c = idx[on]
-                plane = cb[c, ax + 3] if sign > 0 else cb[c, ax]
-                f = np.stack([plane, cb[c, ua], cb[c, ua + 3], cb[c, va], cb[c, va + 3]], 1)
-                i = np.stack([np.full(len(c), p), c, np.full(len(c), ax), np.full(len(c), sign)], 1)
-                rows_f.append(f)
-                rows_i.append(i.astype(np.int64))
-                counts[6 * p + ax * 2 + (sign > 0)] += len(c)
-    side_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return np.concatenate(rows_f), np.concatenate(rows_i), side_start

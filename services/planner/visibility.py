@@ -27,7 +27,8 @@ import numpy.typing as npt
 import scipy.sparse as sp
 
 from common.field import Field, ScannerModel
-from services.planner.exact import exact_kernel, exposed_faces
+from services.planner.exact import exact_kernel
+from services.planner.faces import exposed_faces
 from services.planner.raycast import GridArgs, Table, build_grid, cell_of, first_hit
 
 log = logging.getLogger(__name__)
