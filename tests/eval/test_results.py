@@ -248,6 +248,7 @@ def stationary_stats(true_cm: float, est_cm: float) -> dict[str, Any]:
         "paper_heading_residual_deg": 0.06,
         "estimate": {"residual_x_sd_cm": 0.04, "residual_y_sd_cm": 0.08},
         "estimate_error_cm": {"x": -2.0, "y": -2.1, "z": 0.2},
+        "estimate_heading_error_deg": -0.14,
     }
 
 
@@ -262,8 +263,12 @@ def test_the_stationary_headline_is_the_true_stop() -> None:
     paper = by["stationary: estimate against the planned point, mean distance (the paper's metric)"]
     assert paper not in head and (paper.value, paper.verdict) == (0.33, "no target")
     assert "3 mm" in paper.note and "where the robot stands" in paper.note
-    heading = by["stationary: true heading against the planned heading, mean magnitude"]
-    assert heading in head and heading.verdict == "missed"
+    # a scan location plans no heading: the true heading is shown, unscored; the
+    # estimate's heading against the truth is what a scan inherits
+    kept = by["stationary: true heading against the leg's heading, mean magnitude"]
+    assert kept not in head and kept.verdict == "no target"
+    heading = by["stationary: estimate's heading against the true heading, mean over the hold"]
+    assert heading in head and (heading.value, heading.verdict) == (0.14, "missed")
     lean = by["stationary: estimate against the truth, horizontal (mean over the hold)"]
     assert lean.value == pytest.approx(math.hypot(2.0, 2.1))
 
