@@ -128,9 +128,15 @@ def now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 
 
+#: What the benchmarks write, relative to the checkout's top: a change there is their
+#: output (an earlier benchmark of the same sitting), not a change to the code that ran
+OUTPUTS = ("docs/bench", "docs/results.md", "docs/faults.md", "docs/soak.md")
+
+
 def git_commit(repo: Path = REPO) -> str:
-    """The checkout's short commit, ``+dirty`` when tracked files differ from it (then
-    the commit alone does not name the code that ran); ``unknown`` without git."""
+    """The checkout's short commit, ``+dirty`` when tracked files other than the
+    benchmarks' own outputs (:data:`OUTPUTS`) differ from it (then the commit alone
+    does not name the code that ran); ``unknown`` without git."""
 
     def git(*args: str) -> str | None:
         try:
@@ -148,7 +154,8 @@ def git_commit(repo: Path = REPO) -> str:
     head = git("rev-parse", "--short", "HEAD")
     if not head:
         return "unknown"
-    dirty = git("status", "--porcelain", "--untracked-files=no")
+    outputs = [f":(top,exclude){p}" for p in OUTPUTS]
+    dirty = git("status", "--porcelain", "--untracked-files=no", "--", ":(top)", *outputs)
     return f"{head}+dirty" if dirty else head
 
 

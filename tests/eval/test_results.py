@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from phenorover.eval.results import (
     ResultError,
     Target,
     format_value,
+    git_commit,
     load,
     seed_runs,
     spread,
@@ -349,3 +351,23 @@ def test_a_registration_that_failed_measures_nothing() -> None:
     registration.record(b, None, None, "ValueError: scan_03.e57: E57 file holds no scan")
     assert all(f.value is None for f in b.figures)
     assert b.finish(None, out=quiet()) == 1
+
+
+def test_a_checkout_is_dirty_for_code_not_for_the_benchmarks_own_output(tmp_path: Path) -> None:
+    def git(*args: str) -> None:
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    (tmp_path / "docs" / "bench").mkdir(parents=True)
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "docs" / "bench" / "bench_a.json").write_text("{}")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "one")
+    head = git_commit(tmp_path / "pkg")
+    assert head != "unknown" and not head.endswith("+dirty")
+    # an earlier benchmark of the same sitting rewrote its JSON: still the same code
+    (tmp_path / "docs" / "bench" / "bench_a.json").write_text('{"figures": []}')
+    assert git_commit(tmp_path / "pkg") == head
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert git_commit(tmp_path / "pkg") == f"{head}+dirty"
