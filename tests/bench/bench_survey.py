@@ -53,6 +53,11 @@ from phenorover.eval.error_models import from_manifest
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
 from phenorover.eval.register.truth import find_truth
 from phenorover.eval.results import Bench, Goal, spread
+from tests.bench.survey_compare import (
+    COMPARISONS,
+    PRE_ALIGNMENT_MAX_CM,
+    compare,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 # name -> (manifest, navigation profile)
@@ -62,7 +67,6 @@ SURVEYS = {
     "paper": (REPO / "deploy" / "sim.toml", "paper"),
 }
 # the paper's largest pre-alignment mismatch (its section 6, ENGR), cm
-PRE_ALIGNMENT_MAX_CM = 27.3
 SUMMARY = re.compile(
     r"summary: .*?(\d+)/(\d+) scans done, (\d+) failed, ([\d.]+) m driven.*?; wall (\d+) s; "
     r"files in (\S+)"
@@ -189,11 +193,14 @@ def title(name: str, manifest: Path) -> str:
     return f"{what} ({manifest.name})"
 
 
-def carry(bench: Bench, path: Path, names: list[str]) -> dict[str, dict[str, Any]]:
+def carry(
+    bench: Bench, path: Path, names: list[str], comparisons: bool
+) -> dict[str, dict[str, Any]]:
     """The figures and details of surveys ``names`` from an earlier results file,
-    each figure with its own date and commit (``--keep``); nothing when the file is
-    missing or unreadable."""
-    old = bench.carry(path, [title(n, SURVEYS[n][0]) + "," for n in names])
+    each figure with its own date and commit (``--keep``), with ``comparisons`` the
+    figures that compare them too; nothing when the file is missing or unreadable."""
+    prefixes = [title(n, SURVEYS[n][0]) + "," for n in names]
+    old = bench.carry(path, prefixes + (list(COMPARISONS) if comparisons else []))
     return {} if old is None else {n: old.details[n] for n in names if n in old.details}
 
 
@@ -294,66 +301,6 @@ def measure(
     return {**means, "runs": runs}
 
 
-TILT = (
-    "tilt beyond the scanner compensator's range (the paper blames its pre-alignment's "
-    "mismatches on pitch and roll): ruts, bumps and steeper spots in the simulated ground"
-)
-# what would bring each calibration figure to the paper's
-CLOSE = {
-    "overlap_mean_c2c": "nav + C2C as far above the target-based registration as the "
-    "paper's (2.07 against 1.37 cm): plants that move between scans minutes apart (wind), "
-    "which the simulated plants do not",
-    "overlap_mean_target_based": "the clouds' own disagreement where every pose is right: "
-    "the simulated canopy's leaf size and porosity, and SCENE's matching (its subsampling "
-    "and outlier rejection are not published)",
-    "nav_max": TILT,
-    "hausdorff_mean": "the simulated C2C converges onto the target-based poses; the likeliest "
-    "cause of the paper's centimetre is plants that move between scans (wind)",
-}
-
-
-def compare(bench: Bench, details: dict[str, dict[str, Any]]) -> None:
-    """The baseline against the paper's field figures, and ours against the baseline."""
-    base, ours = details.get("paper", {}), details.get("sim", {})
-    for key, label, paper in (
-        (
-            "overlap_mean_c2c",
-            "nav + C2C mean point error between overlapping scans (SCENE's)",
-            TABLE1["c2c"]["mean_point_cm"],
-        ),
-        (
-            "overlap_mean_target_based",
-            "target-based mean point error between overlapping scans (SCENE's)",
-            TABLE1["target_based"]["mean_point_cm"],
-        ),
-        ("nav_max", "pre-alignment's largest point error", PRE_ALIGNMENT_MAX_CM),
-        ("hausdorff_mean", "nav + C2C cloud to the target-based one, mean", HAUSDORFF["mean_cm"]),
-    ):
-        if base.get(key) is not None:
-            bench.figure(
-                f"{label}: the paper's method in our sim against the paper's field figure",
-                100.0 * abs(base[key] - paper) / paper,
-                "%",
-                goal=Goal("<=", 25.0, CLOSE[key]),
-                note=f"{base[key]:.3g} cm against {paper} cm",
-            )
-    if base.get("c2c") and ours.get("c2c") is not None:
-        bench.figure(
-            "nav + C2C mean point error: ours (make sim) against the paper's method",
-            ours["c2c"] / base["c2c"],
-            "x",
-            goal=Goal(
-                "<=",
-                0.5,
-                "the scans that see no sphere and pair with no neighbour keep their "
-                "navigation pose, whose heading is the compass under the crop averaged "
-                "over the scan (0.2-0.7 deg): more spheres, or a heading reference that "
-                "stands still",
-            ),
-            headline=True,
-        )
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, default=None)
@@ -377,9 +324,14 @@ def main() -> int:
         for name, (manifest, profile) in SURVEYS.items()
         if name in args.only
     }
+    # comparisons of surveys that were all kept are kept too, with the date and
+    # commit they were measured at, not computed again under this run's
+    compared = "sim" in args.only or "paper" in args.only
     if args.keep and args.json is not None:
-        details |= carry(bench, args.json, [n for n in SURVEYS if n not in args.only])
-    compare(bench, details)
+        kept = [n for n in SURVEYS if n not in args.only]
+        details |= carry(bench, args.json, kept, comparisons=not compared)
+    if compared or not args.keep:
+        compare(bench, details)
     return bench.finish(args.json, details)
 
 
