@@ -1,6 +1,8 @@
 """``make results``: docs/results.md from the benchmarks' JSON (docs/bench/*.json).
 
-One table per benchmark (figure, value, target, verdict, error models, date, commit,
+The calibration table first (:mod:`phenorover.eval.calibration_table`: each paper
+figure, the paper's method in our simulator and ours). One table per benchmark
+(figure, value, target, verdict, error models, date, commit,
 machine), the error models in force printed under it, every missed target with its
 measured figure and what would close it, and every experiment that failed. A
 benchmark whose JSON is of an older format is said to be, with no figures; one whose
@@ -19,6 +21,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from phenorover.eval import calibration_table
 from phenorover.eval.results import (
     BENCH_DIR,
     BenchResult,
@@ -192,6 +195,7 @@ def render(bench_dir: Path, docs_dir: Path, previous: str = "") -> str:
         "is measured in our simulator under the error models listed with it.",
         "",
     ]
+    out += calibration_table.section(bench_dir)
     for name, title in names.items():
         out += benchmark_section(name, title, bench_dir, previous)
     out += linked_section(bench_dir, docs_dir)
