@@ -56,7 +56,7 @@ def _survey(label: str, compared: str | None = None, ratio: str | None = None) -
 
 ROWS = (
     _profiles("border: mean cross-track error, true pose", ratio=True),
-    _profiles("border: share of the path below 5 cm", compared=False),
+    _profiles("border: share of the path below 5 cm"),
     _profiles("serpentine: mean cross-track error, true pose", ratio=True),
     _profiles("stationary: estimate against the planned point (the paper's metric)"),
     _profiles("stationary: estimate's heading residual (the paper's metric)"),
@@ -77,7 +77,10 @@ ROWS = (
         "nav + C2C cloud against the target-based cloud: mean distance",
         compared="nav + C2C cloud to the target-based one, mean",
     ),
-    _survey("nav + C2C cloud against the target-based cloud: SD distance"),
+    _survey(
+        "nav + C2C cloud against the target-based cloud: SD distance",
+        compared="nav + C2C cloud to the target-based one, SD",
+    ),
     _survey(
         "nav + C2C: mean point error against the truth",
         ratio="nav + C2C mean point error: ours (make sim) against the paper's method",

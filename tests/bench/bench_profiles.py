@@ -153,7 +153,7 @@ def main() -> int:
                 missing="every seed failed",
             )
         base, ours = means.get(("paper", name)), means.get(("ours", name))
-        if paper is not None and base is not None and key != "share_below_5cm":
+        if paper is not None and base is not None:
             bench.figure(
                 f"{name}: the paper's method in our sim against the paper's field figure",
                 100.0 * abs(base - paper) / paper,

@@ -27,6 +27,7 @@ CLOSE = {
     "hausdorff_mean": "the simulated C2C converges onto the target-based poses; the likeliest "
     "cause of the paper's centimetre is plants that move between scans (wind)",
 }
+CLOSE["hausdorff_sd"] = CLOSE["hausdorff_mean"]
 
 
 # the baseline's figures set beside the paper's: (details key, label, the paper's figure)
@@ -43,6 +44,7 @@ CALIBRATION = (
     ),
     ("nav_max", "pre-alignment's largest point error", PRE_ALIGNMENT_MAX_CM),
     ("hausdorff_mean", "nav + C2C cloud to the target-based one, mean", HAUSDORFF["mean_cm"]),
+    ("hausdorff_sd", "nav + C2C cloud to the target-based one, SD", HAUSDORFF["sd_cm"]),
 )
 OURS_AGAINST_BASE = "nav + C2C mean point error: ours (make sim) against the paper's method"
 # how every comparison figure's name begins: kept with the surveys they compare
