@@ -33,6 +33,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from phenorover.eval.calibration_table import AGAINST_PAPER, OURS_AGAINST
 from phenorover.eval.results import Bench, Goal, seed_runs
 from tests.bench.bench_nav import PLACED, models, run_experiment
 
@@ -155,7 +156,7 @@ def main() -> int:
         base, ours = means.get(("paper", name)), means.get(("ours", name))
         if paper is not None and base is not None:
             bench.figure(
-                f"{name}: the paper's method in our sim against the paper's field figure",
+                f"{name}{AGAINST_PAPER}",
                 100.0 * abs(base - paper) / paper,
                 "%",
                 goal=Goal("<=", 25.0, CALIBRATE[exp]),
@@ -163,7 +164,7 @@ def main() -> int:
             )
         if key == "xte_mean_cm" and base and ours is not None:
             bench.figure(
-                f"{name}: ours against the paper's method",
+                f"{name}{OURS_AGAINST}",
                 ours / base,
                 "x",
                 goal=Goal(

@@ -66,7 +66,6 @@ SURVEYS = {
     "hil": (REPO / "deploy" / "hil.toml", "ours"),
     "paper": (REPO / "deploy" / "sim.toml", "paper"),
 }
-# the paper's largest pre-alignment mismatch (its section 6, ENGR), cm
 SUMMARY = re.compile(
     r"summary: .*?(\d+)/(\d+) scans done, (\d+) failed, ([\d.]+) m driven.*?; wall (\d+) s; "
     r"files in (\S+)"

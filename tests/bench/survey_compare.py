@@ -6,10 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from phenorover.eval.calibration_table import AGAINST_PAPER, SURVEY_OURS_AGAINST
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
 from phenorover.eval.results import Bench, Goal
 
-# the paper's pre-alignment: its largest mismatch between scans placed by navigation
+# the paper's largest pre-alignment mismatch (its section 6, ENGR), cm
 PRE_ALIGNMENT_MAX_CM = 27.3
 TILT = (
     "tilt beyond the scanner compensator's range (the paper blames its pre-alignment's "
@@ -46,7 +47,7 @@ CALIBRATION = (
     ("hausdorff_mean", "nav + C2C cloud to the target-based one, mean", HAUSDORFF["mean_cm"]),
     ("hausdorff_sd", "nav + C2C cloud to the target-based one, SD", HAUSDORFF["sd_cm"]),
 )
-OURS_AGAINST_BASE = "nav + C2C mean point error: ours (make sim) against the paper's method"
+OURS_AGAINST_BASE = SURVEY_OURS_AGAINST
 # how every comparison figure's name begins: kept with the surveys they compare
 COMPARISONS = (*(f"{label}: " for _, label, _ in CALIBRATION), OURS_AGAINST_BASE)
 
@@ -57,7 +58,7 @@ def compare(bench: Bench, details: dict[str, dict[str, Any]]) -> None:
     for key, label, paper in CALIBRATION:
         if base.get(key) is not None:
             bench.figure(
-                f"{label}: the paper's method in our sim against the paper's field figure",
+                f"{label}{AGAINST_PAPER}",
                 100.0 * abs(base[key] - paper) / paper,
                 "%",
                 goal=Goal("<=", 25.0, CLOSE[key]),
