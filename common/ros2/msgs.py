@@ -70,6 +70,12 @@ class Twist(IdlStruct, typename="geometry_msgs/msg/Twist"):
 
 
 @dataclass
+class TwistStamped(IdlStruct, typename="geometry_msgs/msg/TwistStamped"):
+    header: Header
+    twist: Twist
+
+
+@dataclass
 class TwistWithCovariance(IdlStruct, typename="geometry_msgs/msg/TwistWithCovariance"):
     twist: Twist
     covariance: array[float64, 36]

@@ -47,6 +47,7 @@ class RosType(Generic[T]):
 
 
 TWIST = RosType("geometry_msgs/msg/Twist", msgs.Twist)
+TWIST_STAMPED = RosType("geometry_msgs/msg/TwistStamped", msgs.TwistStamped)
 ODOMETRY = RosType("nav_msgs/msg/Odometry", msgs.Odometry)
 LASER_SCAN = RosType("sensor_msgs/msg/LaserScan", msgs.LaserScan)
 IMU = RosType("sensor_msgs/msg/Imu", msgs.Imu)

@@ -48,6 +48,9 @@ TYPE_HASHES: dict[str, str] = {
     "geometry_msgs/msg/Twist": (
         "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
     ),
+    "geometry_msgs/msg/TwistStamped": (
+        "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64"
+    ),
     "nav_msgs/msg/Odometry": (
         "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0"
     ),

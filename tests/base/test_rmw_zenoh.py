@@ -23,14 +23,16 @@ from common.config import zenoh_config
 from common.ros2 import msgs as ros
 from common.ros2 import wire
 from common.ros2.node import Ros2Node
-from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST, RosType
+from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST, TWIST_STAMPED, RosType
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 ZID = "4b33868af7b46327b80673b0f621d09b"
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
 
 
-@pytest.mark.parametrize("rtype", [TWIST, ODOMETRY, LASER_SCAN, IMU], ids=lambda t: t.name)
+@pytest.mark.parametrize(
+    "rtype", [TWIST, TWIST_STAMPED, ODOMETRY, LASER_SCAN, IMU], ids=lambda t: t.name
+)
 def test_type_hashes_are_rosbags_rihs01(rtype: RosType[object]) -> None:
     assert rtype.type_hash == JAZZY.hash_rihs01(rtype.name)
 
