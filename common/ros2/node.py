@@ -2,10 +2,15 @@
 what ``ros2 topic list`` on a machine with ``RMW_IMPLEMENTATION=rmw_zenoh_cpp`` sees
 as a node with its publishers and subscriptions, and what its nodes exchange data with.
 
+Topics only: ROS 2 services and actions are not spoken (see :mod:`common.ros2.wire`).
+
 Callbacks run on Zenoh's threads. A sample without a valid attachment or with a
 payload that is not the topic's CDR is dropped (rmw_zenoh drops the first kind too),
 counted per topic in ``dropped`` and logged once per topic and reason, one line; a
-callback that raises is counted and logged the same way. Nothing raises into Zenoh.
+callback that raises is counted and logged the same way. A sample from a peer on
+rmw_zenoh_cpp 0.2.0-0.2.3 (the old attachment) is dropped and counted too, and logged
+once per node, one line naming the versions: one old peer is one problem, however
+many topics it publishes. Nothing raises into Zenoh.
 """
 
 from __future__ import annotations
@@ -139,6 +144,9 @@ class Ros2Node:
                 if sample.attachment is None:
                     raise wire.WireError("no attachment")
                 wire.Attachment.decode(sample.attachment.to_bytes())
+            except wire.OldAttachment as exc:
+                self._drop(key, "old rmw_zenoh_cpp", exc, per_node=True)
+                return
             except Exception as exc:
                 self._drop(key, "bad attachment", exc)
                 return
@@ -156,13 +164,25 @@ class Ros2Node:
         self._handles.append(self.session.liveliness().declare_token(token))
         return key
 
-    def _drop(self, key: str, what: str, exc: Exception) -> None:
+    def _drop(self, key: str, what: str, exc: Exception, per_node: bool = False) -> None:
+        """Count a dropped sample on ``key``; log the first of each reason, per topic or,
+        with ``per_node``, once for the whole node."""
         reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
+        seen = ("", what) if per_node else (key, what)
         with self._lock:
             self.dropped[key] = self.dropped.get(key, 0) + 1
-            first = (key, what) not in self._logged
-            self._logged.add((key, what))
-        if first:
+            first = seen not in self._logged
+            self._logged.add(seen)
+        if not first:
+            return
+        if per_node:
+            log.warning(
+                "ros2 node %s: %s (first on %s; every such sample dropped, only counted)",
+                self.name,
+                reason,
+                key,
+            )
+        else:
             log.warning(
                 "ros2 %s: dropped a sample, %s: %s (later ones only counted)", key, what, reason
             )

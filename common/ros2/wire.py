@@ -1,41 +1,58 @@
 """ROS 2 over Zenoh as rmw_zenoh speaks it: key expressions, liveliness tokens, QoS
-strings, the per-message attachment and the type names and hashes. Pure: no I/O.
+strings, GIDs, the per-message attachment and the type names and hashes. Pure: no I/O.
 
-Pinned: **rmw_zenoh_cpp 0.2.10**, the ROS 2 Jazzy release (Zenoh 1.x). Read from the
-source bloom released, github.com/ros2-gbp/rmw_zenoh-release at tag
-``release/jazzy/rmw_zenoh_cpp/0.2.10-1`` (ros2/rmw_zenoh's ``jazzy`` branch):
+Topics only: publishers and subscriptions with their liveliness tokens. ROS 2 services
+(``SS``/``SC`` tokens, Zenoh queryables) and actions are not spoken.
 
-- ``src/detail/liveliness_utils.cpp``: the token layout (``KeyexprIndex``), the QoS
-  string (``qos_to_keyexpr``), ``mangle_name`` ('/' -> '%') and the data key
-  (``TopicInfo``: ``<domain>/<topic without outer slashes>/<type>/<hash>``);
-- ``src/detail/attachment_helpers.cpp``: ``AttachmentData::serialize_to_zbytes``, a
-  zenoh-ext Serializer fed int64 sequence number, int64 source timestamp and the
-  ``std::array<uint8_t, 16>`` GID; zenoh-cpp's ``include/zenoh/api/ext/
-  serialization.hxx`` writes a std::array as a sequence (LEB128 length, then the
-  bytes), so the attachment is 33 bytes: ``<q <q 0x10 gid[16]``;
-- ``src/detail/rmw_publisher_data.cpp``: sequence numbers start at 1, the source
-  timestamp is the system clock in ns, node and entity ids come from one counter per
-  context (session);
-- ``src/detail/qos.cpp``: the defaults a QoS string leaves empty (reliable, volatile,
-  keep-last 42, infinite durations);
-- ``src/detail/type_support_common.cpp``: type names ``pkg::msg::dds_::Type_``.
+Supported peers: **rmw_zenoh_cpp 0.2.4 and later on Jazzy, 0.6.x on Kilted and 0.6.0
+to 0.12.0 on Rolling** (Zenoh 1.x); for the types of :mod:`common.ros2.types` their
+attachment, tokens, keys and GIDs are the same. Read from ros2/rmw_zenoh as bloom
+released it (ros2-gbp/rmw_zenoh-release, tags ``release/<distro>/rmw_zenoh_cpp/
+<version>-1``, which hold the package directory ``rmw_zenoh_cpp/``):
 
-The design document (ros2/rmw_zenoh ``docs/design.md``) describes the same layout.
-Earlier releases (0.0.x, Zenoh 0.11) spoke another format: named attachment fields and
-shorter tokens; a peer on those does not interoperate with this module.
+- ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/liveliness_utils.cpp`` at 0.2.10: the
+  token layout (``KeyexprIndex``), the QoS string (``qos_to_keyexpr``),
+  ``mangle_name`` ('/' -> '%'), the data key (``TopicInfo``: ``<domain>/<topic without
+  outer slashes>/<type>/<hash>``) and the GID: ``Entity``'s constructor hashes the
+  whole token with ``simplified_XXH3_128bits`` (``simplified_xxhash3.cpp``: xxHash's
+  XXH3-128, default seed and secret) and memcpy's ``low64`` then ``high64`` into the
+  16 bytes in native order, little-endian on every platform ROS 2 ships for. A peer
+  hashes the tokens it sees the same way (``graph_cache.cpp``), so :func:`gid_of`'s
+  GIDs, which our attachments carry as the publisher GID, are the ones ``ros2 topic
+  info -v`` shows. Rolling 0.12.0 appends an optional part to the tokens of
+  ``Buffer`` types only, none of ours;
+- ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/attachment_helpers.cpp`` at 0.2.4 to
+  0.2.10 (Kilted 0.6.0 to 0.6.7, Rolling 0.6.0 to 0.12.0 alike):
+  ``AttachmentData::serialize_to_zbytes``, a zenoh-ext Serializer fed int64 sequence
+  number, int64 source timestamp and the ``std::array<uint8_t, 16>`` GID; zenoh-cpp's
+  ``include/zenoh/api/ext/serialization.hxx`` writes a std::array as a sequence
+  (LEB128 length, then the bytes), so the attachment is 33 bytes:
+  ``<q <q 0x10 gid[16]``;
+- ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/rmw_publisher_data.cpp`` at 0.2.10:
+  sequence numbers start at 1, the source timestamp is the system clock in ns, node
+  and entity ids come from one counter per context (session);
+- ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/qos.cpp`` at 0.2.10: the defaults a QoS
+  string leaves empty (reliable, volatile, keep-last 42, infinite durations);
+- ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/type_support_common.cpp`` at 0.2.10: type
+  names ``pkg::msg::dds_::Type_``.
 
-One deliberate difference: rmw_zenoh derives an entity's GID from the XXH3-128 hash
-of its liveliness token; we use BLAKE2b-128 of the same token (no xxhash in the
-standard library). The GID is opaque to subscribers (it is reported as the publisher
-GID of each message), so only ``ros2 topic info -v``'s GIDs would differ.
+Jazzy 0.2.0 to 0.2.3 (and Rolling 0.3.0 to 0.5.0) lay out keys, tokens and GIDs the
+same way (0.2.0 to 0.2.2 with transient-local as the QoS string's default durability)
+but attach another format: ros2/rmw_zenoh ``rmw_zenoh_cpp/src/detail/
+attachment_helpers.cpp`` at 0.2.3 serializes each field's name as a string before its
+value (``"sequence_number"``, int64, ``"source_timestamp"``, int64, ``"source_gid"``,
+the array), 77 bytes; 0.2.4 dropped the names (ros2/rmw_zenoh#605). Neither side reads
+the other's samples: :meth:`Attachment.decode` raises :class:`OldAttachment`, which
+names the versions.
 """
 
 from __future__ import annotations
 
-import hashlib
 import struct
 from dataclasses import dataclass
 from typing import Literal
+
+import xxhash
 
 ADMIN_SPACE = "@ros2_lv"
 GID_SIZE = 16  # RMW_GID_STORAGE_SIZE in Jazzy
@@ -62,7 +79,8 @@ TYPE_HASHES: dict[str, str] = {
     ),
 }
 
-EntityKind = Literal["NN", "MP", "MS", "SS", "SC"]
+# the endpoints we declare: publishers and subscriptions; services (SS, SC) are not spoken
+EntityKind = Literal["MP", "MS"]
 # ROS 2 name rules (rcl) for configs: a node name is one token, a namespace absolute
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_]*$"
 NAMESPACE_PATTERN = r"^/([A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*)?$"
@@ -71,6 +89,11 @@ TOPIC_PATTERN = r"^/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*$"  # relat
 
 class WireError(ValueError):
     """A name, token or attachment that rmw_zenoh would not accept."""
+
+
+class OldAttachment(WireError):
+    """An attachment in the named-field format of rmw_zenoh_cpp before 0.2.4 (see the
+    module doc): the peer runs a release whose samples we cannot read, nor it ours."""
 
 
 def dds_type_name(ros_type: str) -> str:
@@ -205,8 +228,19 @@ def _check_name(name: str) -> None:
 
 
 def gid_of(token: str) -> bytes:
-    """An entity's 16-byte GID, a hash of its liveliness token (see the module doc)."""
-    return hashlib.blake2b(token.encode(), digest_size=GID_SIZE).digest()
+    """An entity's 16-byte GID as rmw_zenoh computes it: XXH3-128 of its liveliness
+    token, the low 64 bits then the high 64, each little-endian (see the module doc)."""
+    # xxhash's 128-bit integer is high64 << 64 | low64: little-endian, it is those bytes
+    return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(GID_SIZE, "little")
+
+
+# zenoh-ext writes a string as its LEB128 length, then its UTF-8 bytes
+_OLD_PREFIX = bytes([len("sequence_number")]) + b"sequence_number"
+OLD_ATTACHMENT_MESSAGE = (
+    "attachment in rmw_zenoh_cpp's pre-0.2.4 named-field format: the ROS 2 peer runs "
+    "rmw_zenoh_cpp 0.2.0-0.2.3 (Jazzy; or Rolling 0.3.0-0.5.0); phenorover speaks "
+    "0.2.4 and later (Jazzy): upgrade ros-jazzy-rmw-zenoh-cpp"
+)
 
 
 @dataclass(frozen=True)
@@ -229,7 +263,12 @@ class Attachment:
 
     @classmethod
     def decode(cls, data: bytes) -> Attachment:
-        """Raises WireError naming what is wrong."""
+        """Raises OldAttachment for rmw_zenoh_cpp's pre-0.2.4 format, WireError naming
+        what is wrong for anything else that is not 33 bytes of this format."""
+        # as an int64 these bytes start a sequence number above 7e18, which one counted
+        # from 1 never reaches: they are the old format's first field name
+        if data.startswith(_OLD_PREFIX):
+            raise OldAttachment(OLD_ATTACHMENT_MESSAGE)
         if len(data) != ATTACHMENT_SIZE:
             raise WireError(f"attachment has {len(data)} bytes, not {ATTACHMENT_SIZE}")
         seq, stamp, n = struct.unpack_from("<qqB", data)
