@@ -6,8 +6,15 @@ router over mutual TLS. So each router sees two kinds of link, and Zenoh's acces
 control tells them apart by the link itself:
 
 - ``local``: a TCP link on the loopback interface, this machine's own processes
-  (services, the CLI). They may do anything: whoever runs code on a machine already
-  owns it.
+  (services, the CLI, the robot's ROS 2 nodes over rmw_zenoh). They may do anything:
+  whoever runs code on a machine already owns it. "Anything" is ``**`` plus what
+  ``**`` never matches, because ``@`` chunks are hermetic in Zenoh: the history
+  topics' ``@adv`` keys, and for each ROS 2 domain the manifest's base speaks over
+  rmw_zenoh its discovery (liveliness tokens, liveliness subscribers and the start-up
+  liveliness query under ``@ros2_lv/<domain>/**``) and its transient-local topics'
+  ``<domain>/**/@adv/**``. Where rmw_zenoh's peers and ours mesh directly over
+  loopback (its default session: a peer with gossip) the router is not in their path;
+  it is for every ROS 2 node in client mode and for whatever it relays.
 - a remote machine: a TLS link whose client certificate (signed by the deployment's
   CA, checked by mutual TLS) has that machine's name as its common name. What it may
   send is its role's :class:`Grants` below; whatever else it sends is denied, and the
@@ -35,7 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from common import keys
@@ -191,13 +198,24 @@ def alive_rule(cn: str, role: Role) -> dict[str, Any]:
     return _rule(f"{cn}: alive", ["liveliness_token"], (where,), "ingress")
 
 
-def router_acl(access: AccessConfig) -> dict[str, Any]:
+def ros2_exprs(domain: int) -> tuple[str, str]:
+    """What rmw_zenoh uses of ROS 2 domain ``domain`` that ``**`` does not match:
+    discovery, and the transient-local topics' advanced publisher keys (its data keys
+    ``<domain>/<topic>/<type>/<hash>`` are under ``**``)."""
+    return f"@ros2_lv/{domain}/**", f"{domain}/**/@adv/**"
+
+
+def router_acl(access: AccessConfig, ros2_domains: Iterable[int] = ()) -> dict[str, Any]:
     """The ``access_control`` section for a router: default deny, this machine's own
-    loopback TCP links allowed everything, each remote certificate common name in
-    ``access.remotes`` allowed its role's grants."""
+    loopback TCP links allowed everything (with rmw_zenoh's keys of ``ros2_domains``),
+    each remote certificate common name in ``access.remotes`` allowed its role's
+    grants; no remote machine is allowed any ROS 2 key."""
+    local = ("**", *map(adv, HISTORY))
+    for d in sorted(set(ros2_domains)):
+        local += ros2_exprs(d)
     rules: list[dict[str, Any]] = [
-        _rule("local: anything", list(MESSAGES), ("**", *map(adv, HISTORY)), "ingress"),
-        _rule("local: receive", list(MESSAGES), ("**", *map(adv, HISTORY)), "egress"),
+        _rule("local: anything", list(MESSAGES), local, "ingress"),
+        _rule("local: receive", list(MESSAGES), local, "egress"),
     ]
     subjects: list[dict[str, Any]] = [
         {"id": "local", "interfaces": [access.loopback], "link_protocols": ["tcp"]}

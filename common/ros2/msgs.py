@@ -119,6 +119,13 @@ def twist(v: float, w: float) -> Twist:
     return Twist(Vector3(v, 0.0, 0.0), Vector3(0.0, 0.0, w))
 
 
+def twist_stamped(v: float, w: float, stamp_ns: int, frame_id: str) -> TwistStamped:
+    """:func:`twist` with a header. ros2_controllers' diff_drive_controller (Clearpath's
+    Jazzy platform) measures a command's age from this stamp against its own clock and
+    brakes past ``cmd_vel_timeout``, so the stamp must be the robot's clock, now."""
+    return TwistStamped(Header(time_of_ns(stamp_ns), frame_id), twist(v, w))
+
+
 def yaw_of(q: Quaternion) -> float:
     """Yaw (rad, about z) of a quaternion."""
     return euler_of(q)[2]

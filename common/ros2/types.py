@@ -4,7 +4,7 @@ RIHS01 hash: one place that ties a topic's key to how its payload decodes."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Literal, TypeVar
 
 from common.ros2 import msgs
 from common.ros2.wire import TYPE_HASHES, dds_type_name
@@ -51,3 +51,13 @@ TWIST_STAMPED = RosType("geometry_msgs/msg/TwistStamped", msgs.TwistStamped)
 ODOMETRY = RosType("nav_msgs/msg/Odometry", msgs.Odometry)
 LASER_SCAN = RosType("sensor_msgs/msg/LaserScan", msgs.LaserScan)
 IMU = RosType("sensor_msgs/msg/Imu", msgs.Imu)
+
+# what a base driver takes on ``cmd_vel``, by the name a manifest gives: Clearpath's
+# ROS 2 Jazzy platform takes TwistStamped, most other drivers (and Humble's) Twist
+CmdVelType = Literal["Twist", "TwistStamped"]
+CMD_VEL_TYPES: dict[str, RosType[Any]] = {"Twist": TWIST, "TwistStamped": TWIST_STAMPED}
+
+
+def twist_of(msg: msgs.Twist | msgs.TwistStamped) -> msgs.Twist:
+    """The velocities of a command of either type."""
+    return msg.twist if isinstance(msg, msgs.TwistStamped) else msg

@@ -18,7 +18,7 @@ from common.messages.core import Array
 from common.messages.sim import SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST
+from common.ros2.types import CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
 from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
 from services.base.config import BaseConfig
@@ -147,7 +147,8 @@ class OdomWatch:
 
 
 class Ros2Base:
-    """Any ROS 2 base: Twist out, Odometry, LaserScan and Imu in, CDR payloads. Through
+    """Any ROS 2 base: Twist or TwistStamped out, Odometry, LaserScan and Imu in, CDR
+    payloads. Through
     rmw_zenoh (``ros2_layout = "rmw_zenoh"``, :mod:`common.ros2`): this service is a
     ROS 2 node on the Zenoh network; through zenoh-bridge-ros2dds (``"bridge"``): the
     bridge maps ROS topic ``/cmd_vel`` to the Zenoh key ``cmd_vel`` (and so on).
@@ -208,7 +209,9 @@ class Ros2Base:
                 return
             on_imu(msg)
 
-        self._put: Callable[[ros.Twist], None]
+        self._cmd_type = CMD_VEL_TYPES[cfg.ros2_cmd_vel_type]
+        self._frame = cfg.ros2_cmd_vel_frame
+        self._put: Callable[[ros.Twist | ros.TwistStamped], None]
         if cfg.ros2_layout == "bridge":
             key = cfg.ros2_cmd_vel
             bus.subscribe_raw(cfg.ros2_odom, decode_odometry, odom)
@@ -218,7 +221,7 @@ class Ros2Base:
         else:
             node = Ros2Node(bus.session, cfg.ros2_node, cfg.ros2_namespace, cfg.ros2_domain)
             bus.report("ros2_dropped", lambda: node.dropped_total)
-            self._put = node.publisher(cfg.ros2_cmd_vel, TWIST).put
+            self._put = node.publisher(cfg.ros2_cmd_vel, self._cmd_type).put
             node.subscribe(cfg.ros2_odom, ODOMETRY, odom)
             node.subscribe(cfg.ros2_scan, LASER_SCAN, scan, qos=SENSOR_QOS)
             node.subscribe(cfg.ros2_imu, IMU, imu, qos=SENSOR_QOS)
@@ -238,7 +241,10 @@ class Ros2Base:
             v = w = 0.0
         elif was:
             self._log.info("odometry from the ROS 2 base is back: commands pass again")
-        self._put(ros.twist(v, w))
+        if self._cmd_type.cls is ros.TwistStamped:
+            self._put(ros.twist_stamped(v, w, stamp_ns, self._frame))
+        else:
+            self._put(ros.twist(v, w))
 
 
 BACKENDS: dict[str, type[SimBase] | type[Ros2Base]] = {"sim": SimBase, "ros2": Ros2Base}

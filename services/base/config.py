@@ -2,6 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.ros2.types import CmdVelType
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
@@ -26,6 +27,12 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ``/cmd_vel`` to the plain Zenoh key ``cmd_vel``). ``ros2_odom_timeout_s``: with no
     odometry from the ROS 2 base for this long (its driver is gone, or the link to
     it), the base commands zero until odometry returns, and says so in its log.
+
+    ``ros2_cmd_vel_type``: ``Twist`` (geometry_msgs/msg/Twist: ROS 2 Humble's
+    Clearpath stack, most drivers) or ``TwistStamped`` (Clearpath's ROS 2 Jazzy
+    platform), stamped on the service clock with frame ``ros2_cmd_vel_frame``. A type
+    the driver does not take is a different rmw_zenoh key, so it would never hear us:
+    ``ros2 topic info -v <cmd_vel>`` on the robot names the type it subscribes.
     """
 
     backend: Literal["sim", "ros2"]  # required: a robot must never drive a simulated base
@@ -43,6 +50,8 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     var_w: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
     turn_slip_sd: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.1
     ros2_cmd_vel: Topic = "cmd_vel"
+    ros2_cmd_vel_type: CmdVelType = "Twist"
+    ros2_cmd_vel_frame: str = "base_link"
     ros2_odom: Topic = "odom"
     ros2_scan: Topic = "scan"
     ros2_imu: Topic = "imu/data"

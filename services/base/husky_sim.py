@@ -4,7 +4,8 @@ service drives it as it drives the real Husky, and it drives the simulator's bas
 ``python -m services.base.husky_sim --manifest M`` (config ``[services.husky-sim]``).
 As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
 
-- subscribes ``cmd_vel`` (geometry_msgs/Twist) and forwards each command to the
+- subscribes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped as Clearpath's Jazzy
+  platform takes it: ``cmd_vel_type``) and forwards each command to the
   simulator as a SimWheelCommand on ``sim/device/wheels``;
 - publishes ``odom`` (nav_msgs/Odometry) at the encoder rate, one per
   ``sim/device/encoders`` message: pose integrated from the encoder twist (the
@@ -36,7 +37,7 @@ from common.messages.base import Imu, LaserScan
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST
+from common.ros2.types import CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY, CmdVelType, twist_of
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 from common.service import Context, run
 from services.base.drive import OdometryIntegrator
@@ -59,12 +60,17 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu`` name them, resolved
     against ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x,
     y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the IMU's yaw variance
-    (rad^2)."""
+    (rad^2). ``cmd_vel_type = "TwistStamped"`` with ``namespace = "/a200_0000"``,
+    ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"`` and ``imu =
+    "sensors/imu_0/data"`` plays Clearpath's ROS 2 Jazzy platform, which also refuses a
+    stamped command older than ``cmd_vel_timeout_s`` by its own clock
+    (diff_drive_controller's ``cmd_vel_timeout``, 0.5 s) and takes a zero stamp as now."""
 
     domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
     namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
     node_name: Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)] = "husky_node"
     cmd_vel: Topic = "cmd_vel"
+    cmd_vel_type: CmdVelType = "Twist"
     odom: Topic = "odom"
     scan: Topic = "scan"
     imu: Topic = "imu/data"
@@ -73,6 +79,7 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     pose_covariance: Cov6 = HUSKY_COVARIANCE
     twist_covariance: Cov6 = HUSKY_COVARIANCE
     yaw_var: Annotated[float, msgspec.Meta(ge=0)] = IMU_YAW_VAR
+    cmd_vel_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.5
 
 
 def covariance(diagonal: Cov6) -> list[float]:
@@ -106,6 +113,13 @@ def imu_to_ros(m: Imu, stamp_ns: int, yaw_var: float) -> ros.Imu:
     )
 
 
+def command_age_s(msg: ros.TwistStamped, now_ns: int) -> float:
+    """How old a stamped command is by the driver's clock; a zero stamp is taken as
+    now, as diff_drive_controller takes it."""
+    stamp_ns = ros.ns_of_time(msg.header.stamp)
+    return 0.0 if stamp_ns == 0 else (now_ns - stamp_ns) * 1e-9
+
+
 class HuskySim:
     def __init__(self, ctx: Context, cfg: HuskySimConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
@@ -122,7 +136,7 @@ class HuskySim:
         self._wheels = ctx.bus.publisher(keys.SIM_WHEELS)
         ctx.bus.report("ros2_dropped", lambda: self.node.dropped_total)
         ctx.bus.report("commands_refused", lambda: self.refused)
-        self.node.subscribe(cfg.cmd_vel, TWIST, self._on_cmd)
+        self.node.subscribe(cfg.cmd_vel, CMD_VEL_TYPES[cfg.cmd_vel_type], self._on_cmd)
         ctx.bus.subscribe(keys.SIM_ENCODERS, self._on_encoders)
         ctx.bus.subscribe(keys.SIM_LIDAR, self._on_lidar)
         ctx.bus.subscribe(keys.SIM_IMU, self._on_imu)
@@ -133,16 +147,27 @@ class HuskySim:
             self.ctx.log.warning("fault: driver %s", "silent" if silent else "back")
         self.silent = silent
 
-    def _on_cmd(self, t: ros.Twist) -> None:
+    def _on_cmd(self, msg: ros.Twist | ros.TwistStamped) -> None:
         if self.silent:
             return
+        now_ns = self.ctx.clock.now_ns()
+        t = twist_of(msg)
         v, w = t.linear.x, t.angular.z
+        problem = ""
         if not (math.isfinite(v) and math.isfinite(w)):
+            problem = f"v={v!r} w={w!r} is not finite"
+        elif isinstance(msg, ros.TwistStamped):
+            age_s = command_age_s(msg, now_ns)
+            if age_s > self.cfg.cmd_vel_timeout_s:
+                problem = (
+                    f"stamped {age_s:.3f} s ago (cmd_vel_timeout {self.cfg.cmd_vel_timeout_s} s)"
+                )
+        if problem:
             self.refused += 1
             if self.refused == 1:
-                self.ctx.log.warning("cmd_vel refused: v=%r w=%r is not finite", v, w)
+                self.ctx.log.warning("cmd_vel refused (later ones only counted): %s", problem)
             return
-        self._wheels.put(SimWheelCommand(stamp_ns=self.ctx.clock.now_ns(), v=v, w=w))
+        self._wheels.put(SimWheelCommand(stamp_ns=now_ns, v=v, w=w))
 
     def _on_encoders(self, m: SimEncoders) -> None:
         with self._lock:

@@ -13,10 +13,11 @@ import pytest
 from common.config import ConfigError, decode_section
 from common.messages.base import Imu
 from common.ros2 import msgs as ros
+from common.ros2.types import twist_of
 from common.transport import Bus
 from services.base.backends import OdomWatch, Ros2Base, decode_odometry, imu_from_ros
 from services.base.config import BaseConfig
-from services.base.husky_sim import HuskySimConfig
+from services.base.husky_sim import HuskySimConfig, command_age_s
 from tests.conftest import Record
 
 MS = 1_000_000
@@ -127,3 +128,37 @@ def test_bridge_layout_imu_drops_bad_messages(
     assert client_bus.decode_stats.by_key == {"t/imu": 1}
     refused = [r for r in caplog.records if "IMU from the ROS 2 base refused" in r.message]
     assert len(refused) == 1 and "orientation" in refused[0].message, caplog.text
+
+
+def test_twist_stamped_carries_the_command_stamp_and_frame(client_bus: Bus) -> None:
+    """Clearpath's Jazzy platform takes TwistStamped: the stamp is the command's (the
+    robot's clock), the frame the configured one."""
+    cfg = BaseConfig(
+        backend="ros2", ros2_layout="bridge", ros2_cmd_vel="s/cmd_vel",
+        ros2_cmd_vel_type="TwistStamped", ros2_cmd_vel_frame="base_link",
+    )  # fmt: skip
+    base = Ros2Base(
+        cfg, client_bus, lambda *_: None, lambda *_: None, lambda _: None, lambda _: None
+    )
+    got: Record[ros.TwistStamped] = Record()
+    client_bus.subscribe_raw("s/cmd_vel", ros.TwistStamped.deserialize, got.add)
+    for _ in range(50):  # until the subscription has reached the base's session
+        base.send(0.3, -0.1, 12_000_000_345)
+        if got.until(bool, timeout=0.1):
+            break
+    m = got.wait_for(lambda m: True, timeout=1.0)
+    assert m is not None, "no TwistStamped on s/cmd_vel"
+    assert (m.twist.linear.x, m.twist.angular.z) == (0.3, -0.1)
+    assert (m.header.stamp.sec, m.header.stamp.nanosec) == (12, 345)
+    assert m.header.frame_id == "base_link"
+
+
+def test_emulated_clearpath_driver_ages_stamped_commands() -> None:
+    """diff_drive_controller's rule, as the Husky emulator plays it: a zero stamp is
+    now, otherwise the age by the driver's clock."""
+    stamped = ros.twist_stamped(0.2, 0.0, 9_500_000_000, "base_link")
+    assert command_age_s(stamped, 10_000_000_000) == pytest.approx(0.5)
+    assert command_age_s(ros.twist_stamped(0.2, 0.0, 0, "base_link"), 10**12) == 0.0
+    assert twist_of(stamped) == ros.twist(0.2, 0.0) == twist_of(ros.twist(0.2, 0.0))
+    with pytest.raises(ConfigError):
+        decode_section({"backend": "ros2", "ros2_cmd_vel_type": "Twist2"}, BaseConfig, "base")
