@@ -5,18 +5,26 @@ optionally with a ``height`` property (metres). A foreign member ``"phenorover"`
 settings (:class:`GeoSettings`); without ``row_bearing_deg`` the bearing is taken from
 the longest edge of the first polygon. Polygons must be axis-aligned rectangles once
 rotated by the row bearing.
+
+Where a field is on the globe (:func:`placed`): a field that gives its origin is there.
+A field that gives none is refused by a real deployment (GNSS would place the robot in
+a frame nobody surveyed) and placed at :data:`DEFAULT_ORIGIN` by a simulated one (a
+deployment on the sim clock, whose world is the simulator's): the one rule every
+service of a deployment applies when it loads the field frame, so all agree.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from common.field import assemble, load_field
+from common.clock import SimClock
+from common.field import assemble, field_path, load_field
 from common.field_model import (
     MAX_PLOTS,
     Altitude,
@@ -68,9 +76,58 @@ class _Collection(msgspec.Struct, frozen=True, rename={"settings": "phenorover"}
     settings: GeoSettings = msgspec.field(default_factory=GeoSettings)
 
 
+# Where a simulated world puts a field that gives no origin: the origin of the paper's
+# ENGR field (common/fields/engr.toml; Iron Horse Farm, Greene County, GA). A real
+# place, so simulated GNSS reads as a receiver there would (ordinary latitudes, one
+# UTM zone, the same projections the robot uses); (0, 0) would put the field in the
+# Gulf of Guinea, on the equator and on the boundary of UTM zones 30 and 31.
+DEFAULT_ORIGIN: tuple[float, float] = (33.717028, -83.308083)
+ORIGIN_KEYS = ("origin_lat", "origin_lon")
+
+
+def simulated(clock: object) -> bool:
+    """Whether a deployment's world is the simulator's: its clock is the sim clock
+    (a manifest's ``clock = "sim"``, or a service's :class:`common.clock.SimClock`)."""
+    return clock == "sim" or isinstance(clock, SimClock)
+
+
+def placed(layout: FieldLayout, source: str | Path, clock: object = None) -> FieldLayout:
+    """``layout`` on the globe: as it is when it gives ``origin_lat`` and ``origin_lon``;
+    else, in a simulated world (:func:`simulated` of the deployment's ``clock``), at
+    :data:`DEFAULT_ORIGIN` (its ``origin_alt`` and ``row_bearing_deg`` kept). Raises
+    FieldError naming ``source`` and the missing keys otherwise, and for a field that
+    gives only one of the two (a typo, not a choice)."""
+    missing = [k for k in ORIGIN_KEYS if getattr(layout, k) is None]
+    if not missing:
+        return layout
+    where = f"{source}: field {layout.name!r}"
+    if len(missing) == 1:
+        given = ORIGIN_KEYS[1 - ORIGIN_KEYS.index(missing[0])]
+        raise FieldError(f"{where}: {given} is set but {missing[0]} is not")
+    if not simulated(clock):
+        raise FieldError(
+            f"{where} has no georeference: origin_lat, origin_lon are not set (a "
+            'deployment on the robot needs them; only a simulated one, clock = "sim", '
+            "places such a field at a default origin)"
+        )
+    lat, lon = DEFAULT_ORIGIN
+    return msgspec.structs.replace(layout, origin_lat=lat, origin_lon=lon)
+
+
+def default_origin_note(layout: FieldLayout) -> str:
+    """The line that says a field was placed at :data:`DEFAULT_ORIGIN`."""
+    lat, lon = DEFAULT_ORIGIN
+    ns, ew = "NS"[lat < 0], "EW"[lon < 0]
+    return (
+        f"field {layout.name!r} has no georeference: placed at the default origin "
+        f"{abs(lat):.6f} {ns}, {abs(lon):.6f} {ew} (simulation only; set "
+        "origin_lat/origin_lon to survey it)"
+    )
+
+
 def field_frame(layout: FieldLayout) -> FieldFrame:
     """The :class:`common.geo.FieldFrame` of a georeferenced layout; raises ValueError
-    when ``origin_lat``/``origin_lon`` are missing."""
+    when ``origin_lat``/``origin_lon`` are missing (see :func:`placed`)."""
     if layout.origin_lat is None or layout.origin_lon is None:
         raise ValueError(f"field {layout.name!r} has no origin_lat/origin_lon")
     return FieldFrame(
@@ -78,20 +135,19 @@ def field_frame(layout: FieldLayout) -> FieldFrame:
     )
 
 
-def load_georeferenced(source: str) -> tuple[FieldFrame, Field]:
+def load_georeferenced(source: str, clock: object = None) -> tuple[FieldFrame, Field]:
     """The field frame (what every service of a deployment shares) and the field of a
-    field file or example, read once; raises FieldError when it cannot be read or is
-    not georeferenced."""
+    field file or example, read once. ``clock``: the deployment's (a service's
+    ``ctx.clock``), which says whether a field with no origin is placed at
+    :data:`DEFAULT_ORIGIN` (:func:`placed`). Raises FieldError, one line naming the
+    file, when the field cannot be read or has no place on the globe."""
     layout, fld = load_field(source)
-    try:
-        return field_frame(layout), fld
-    except ValueError as exc:
-        raise FieldError(f"{source}: {exc}") from None
+    return field_frame(placed(layout, field_path(source), clock)), fld
 
 
-def load_frame(source: str) -> FieldFrame:
+def load_frame(source: str, clock: object = None) -> FieldFrame:
     """The field frame of a field file or example (see :func:`load_georeferenced`)."""
-    return load_georeferenced(source)[0]
+    return load_georeferenced(source, clock)[0]
 
 
 def field_to_wgs84(layout: FieldLayout, xy: F64) -> F64:

@@ -34,7 +34,7 @@ def cmd_up(args: argparse.Namespace) -> int:
 
 def cmd_check(manifest: Path) -> int:
     """``up --check``: what each service would open; exit 2 with a line per problem."""
-    from phenorover.preflight import check
+    from phenorover.findings import check
 
     try:
         report, problems = check(manifest)
@@ -90,32 +90,23 @@ def cmd_sim(args: argparse.Namespace) -> int:
     ``--field`` is the field of the whole deployment, not only of the survey: every
     service (the simulated world included) is started with it. Exit status: 0 when
     every location was scanned, 1 when the survey failed or left a location unscanned
-    (each named with the reason), 2 on a bad manifest or field."""
-    from common.config import decode_section
-    from common.field import FieldError, load_field
+    (each named with the reason), 2 on a bad manifest or field, found before anything
+    starts (:func:`phenorover.preflight.preflight`, with the field given)."""
     from common.transport import Bus
     from phenorover.launcher import Launcher
     from services.mission.cli import describe, run_survey
-    from services.planner.budget import check
-    from services.planner.config import PlannerConfig
 
+    field = args.field or None
+    if field and Path(field).exists():  # one file for every service, whatever its cwd
+        field = str(Path(field).resolve())
     try:
-        launcher = Launcher(args.manifest)
+        launcher = Launcher(args.manifest, field=field)
     except ConfigError as exc:
         print(f"phenorover sim: {exc}", file=sys.stderr)
         return 2
-    field = args.field or launcher.manifest.field
-    if args.field and Path(field).exists():  # one file for every service, whatever its cwd
-        field = str(Path(field).resolve())
-    try:  # a field nobody could plan fails here, in one line, before anything starts
-        planner = launcher.manifest.services.get("planner", {})
-        budget = decode_section(planner, PlannerConfig, "[services.planner]").budget
-        check(load_field(field)[1], budget)
-    except FieldError as exc:
-        print(f"phenorover sim: {exc}", file=sys.stderr)
-        return 2
-    if args.field:
-        launcher.extra_args = {name: ["--field", field] for name in launcher.children}
+    field = launcher.manifest.field
+    for note in launcher.notes:
+        print(note, flush=True)
     wanted = set(launcher.children)
     t0 = time.monotonic()
     with launcher, open_client(args.manifest, []) as session:

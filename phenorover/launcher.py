@@ -28,11 +28,12 @@ from typing import IO, Any
 import zenoh
 
 from common.acl import LOG_TARGET, DenialLog, router_acl
-from common.config import ConfigError, Manifest, zenoh_config
+from common.config import ConfigError, Manifest, decode_section, zenoh_config
 from common.process import die_with_parent
-from phenorover.preflight import check_field, check_robot, validate
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
+from phenorover.preflight import preflight
 from services import SERVICES, module_of
+from services.base.config import BaseConfig
 
 log = logging.getLogger("phenorover.up")
 acl_log = logging.getLogger("phenorover.acl")
@@ -42,10 +43,21 @@ acl_log = logging.getLogger("phenorover.acl")
 ACL_LOG_FILTER = f"error,{LOG_TARGET}=trace"
 
 
+def ros2_domains(manifest: Manifest) -> list[int]:
+    """The ROS 2 domains this machine's services speak over rmw_zenoh: the base's,
+    when it drives a ROS 2 base through rmw_zenoh (its section was validated)."""
+    section = manifest.services.get("base")
+    if section is None:
+        return []
+    cfg = decode_section(section, BaseConfig, "[services.base]")
+    return [cfg.ros2_domain] if cfg.backend == "ros2" and cfg.ros2_layout == "rmw_zenoh" else []
+
+
 def router_config(manifest: Manifest) -> zenoh.Config:
-    """This machine's router: its endpoints, TLS and access control from the manifest."""
+    """This machine's router: its endpoints, TLS and access control from the manifest
+    (local links admitted to the ROS 2 domain its base speaks, :func:`ros2_domains`)."""
     zs = manifest.zenoh
-    acl = router_acl(zs.access) if zs.access is not None else None
+    acl = router_acl(zs.access, ros2_domains(manifest)) if zs.access is not None else None
     return zenoh_config("router", zs.listen, zs.connect, zs.tls, access_control=acl)
 
 
@@ -95,13 +107,17 @@ class Launcher:
         out: IO[str] | None = None,
         extra_args: dict[str, list[str]] | None = None,
         grace_s: float = 4.0,
+        field: str | None = None,
     ) -> None:
+        """``field``: the field of every service instead of the manifest's (checked as
+        such). Raises ConfigError when :func:`preflight` finds the deployment wrong;
+        ``notes`` are its start-up lines."""
         self.path = manifest_path
-        self.manifest = validate(manifest_path)
-        check_field(self.manifest, manifest_path)
-        check_robot(self.manifest, manifest_path)
+        self.manifest, self.notes = preflight(manifest_path, field)
         self.out = out or sys.stdout
         self.extra_args = extra_args or {}
+        if field is not None:
+            self.extra_args = {n: ["--field", field, *self.extra_args.get(n, [])] for n in SERVICES}
         self.grace_s = grace_s
         # jobs (``services.JOBS``, e.g. register) are configured here but run on demand
         self.children = {name: Child(name) for name in self.manifest.services if name in SERVICES}
@@ -232,6 +248,8 @@ def up(manifest_path: Path) -> int:
     except ConfigError as exc:
         print(f"phenorover up: {exc}", file=sys.stderr)
         return 2
+    for note in launcher.notes:
+        log.warning("%s", note)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())

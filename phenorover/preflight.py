@@ -1,45 +1,37 @@
-"""What is checked before a deployment starts, and ``phenorover up --check``.
+"""What is checked before a deployment starts.
 
-:func:`validate` checks a manifest as written (every service section against its
-config type, the Zenoh settings); :func:`check_field` loads its field. The launcher
-runs both before it starts anything, so a bad manifest is one error line, never a
-service restarted in a loop.
-
-:func:`check` is ``phenorover up --check``: what each service would open (serial port,
-TCP address, CAN channel, ROS 2 topics, folders, the field, TLS files) and one problem
-line per device or file that is not there. Nothing is opened: devices and files are
-only looked at (``/dev/ttyUSB0`` exists, ``/sys/class/net/can0`` exists, a file is
-readable), so it is safe beside a running deployment and on a machine with no hardware.
+:func:`preflight` is what the launcher runs before it opens the router or starts a
+service: the manifest as written (:func:`validate`: every service section against its
+config type, the Zenoh settings), the robot description (:func:`check_robot`), the
+deployment's field (:func:`check_field`: it loads, and has a place on the globe where a
+service needs its frame) and what each service would check only once started against
+the field and the robot (:func:`service_problems`). A bad deployment is one error
+line, never a service restarted in a loop. ``phenorover up --check`` runs the same
+checks and says what each service would open (:mod:`phenorover.findings`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
-import os
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import msgspec
 
-from common.certs import tls_problems
-from common.config import (
-    ConfigError,
-    Manifest,
-    TlsConfig,
-    ZenohSettings,
-    decode_section,
-    load_manifest,
-)
-from common.field import FieldError, load_field
-from common.field_geojson import load_frame
-from common.robot import load_robot, robot_path
+from common.config import ConfigError, Manifest, ZenohSettings, decode_section, load_manifest
+from common.field import Field, FieldError, FieldLayout, field_path, load_field
+from common.field_geojson import default_origin_note, placed
+from common.robot import Robot, load_robot
 from services import JOBS, SERVICES
+from services.nav.config import NavConfig, check_limits
+from services.planner.budget import check as check_budget
+from services.planner.config import PlannerConfig
 
-# services that cannot start without the surveyed field: its georeference is the frame
-# they publish in (viz and the planner do without one until a plan names it)
-NEEDS_FIELD = ("sim", "gnss", "nav")
+# services that load the field frame at start: the field must have a place on the
+# globe (:func:`common.field_geojson.placed`; viz and the planner do without one)
+NEEDS_FRAME = ("gnss", "nav", "reach-sim")
+# services that cannot start without the surveyed field
+NEEDS_FIELD = ("sim", *NEEDS_FRAME)
 
 
 def config_type(service: str, where: str) -> type[msgspec.Struct]:
@@ -64,7 +56,7 @@ def validate(path: Path) -> Manifest:
     return manifest
 
 
-def _loopback(endpoint: str) -> bool:
+def loopback(endpoint: str) -> bool:
     host = endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
     return host in ("localhost", "::1") or host.startswith("127.")
 
@@ -84,16 +76,28 @@ def check_zenoh(zs: ZenohSettings, where: str) -> None:
             "mutual = true: remote machines are known by their certificates"
         )
     for ep in zs.listen:
-        if not ep.startswith("tls/") and not _loopback(ep):
+        if not ep.startswith("tls/") and not loopback(ep):
             raise ConfigError(
                 f"{where}: listen {ep}: plain {ep.partition('/')[0]} off loopback would "
                 "bypass TLS; use tls/ between machines"
             )
 
 
-def check_field(manifest: Manifest, path: Path) -> None:
-    """The manifest's field loads (and is georeferenced where a service needs its
-    frame); a manifest whose services need a field names one. Raises ConfigError."""
+@dataclasses.dataclass(frozen=True)
+class DeployedField:
+    """The deployment's field as loaded; ``note``: the start-up line saying it was
+    placed at the default origin (empty when it gives its own, or none is needed)."""
+
+    layout: FieldLayout
+    field: Field
+    note: str = ""
+
+
+def check_field(manifest: Manifest, path: Path) -> DeployedField | None:
+    """The manifest's field loads, and where a service needs its frame it has a place
+    on the globe by the one rule every service applies (:func:`placed`: its own
+    origin, or in a simulated deployment the default one); a manifest whose services
+    need a field names one. None: no field and none needed. Raises ConfigError."""
     needs = [s for s in NEEDS_FIELD if s in manifest.services]
     if not manifest.field:
         if needs:
@@ -101,233 +105,60 @@ def check_field(manifest: Manifest, path: Path) -> None:
                 f"{path}: field: not set, and {', '.join(needs)} need the surveyed field "
                 "(a .toml/.geojson field file, or an example name such as engr)"
             )
-        return
+        return None
     try:
-        if {"gnss", "nav"} & set(needs):
-            load_frame(manifest.field)
-        else:
-            load_field(manifest.field)
+        layout, fld = load_field(manifest.field)
+        note = ""
+        if any(s in manifest.services for s in NEEDS_FRAME):
+            where = placed(layout, field_path(manifest.field), manifest.clock)
+            note = "" if where is layout else default_origin_note(layout)
     except FieldError as exc:
         raise ConfigError(f"{path}: field: {exc}") from None
+    return DeployedField(layout, fld, note)
 
 
-def check_robot(manifest: Manifest, path: Path) -> None:
-    """The manifest's robot description loads. Raises ConfigError naming the file."""
+def check_robot(manifest: Manifest, path: Path) -> Robot:
+    """The manifest's robot description. Raises ConfigError naming the file."""
     try:
-        load_robot(manifest.robot)
+        return load_robot(manifest.robot)
     except ConfigError as exc:
         raise ConfigError(f"{path}: robot: {exc}") from None
 
 
-@dataclasses.dataclass(frozen=True)
-class Finding:
-    """One thing a service would open, and why it cannot (``problem``), if it cannot."""
-
-    what: str
-    problem: str = ""
-
-
-def _exists(path: str, kind: str) -> str:
-    return "" if os.path.exists(path) else f"{path}: no such {kind}"
-
-
-def _device(path: str) -> str:
-    if not os.path.exists(path):
-        return f"{path}: no such device"
-    return "" if os.access(path, os.R_OK | os.W_OK) else f"{path}: not readable and writable"
-
-
-def _folder(path: str) -> str:
-    """A folder a service writes into: it exists and is writable, or can be made."""
-    p = Path(path).absolute()
-    while not p.exists():
-        p = p.parent
-    if not p.is_dir():
-        return f"{path}: {p} is not a folder"
-    return "" if os.access(p, os.W_OK | os.X_OK) else f"{path}: {p} is not writable"
-
-
-def _readable(path: str, what: str) -> str:
-    if not os.path.isfile(path):
-        return f"{what} {path}: no such file"
-    return "" if os.access(path, os.R_OK) else f"{what} {path}: not readable"
-
-
-def _gnss(cfg: Any) -> list[Finding]:
-    if cfg.backend == "sim":
-        return [Finding("simulated receivers (from the sim service)")]
-    out = []
-    for a in cfg.antennas:
-        if cfg.backend == "nmea-serial":
-            out.append(
-                Finding(f"antenna {a.id}: serial {a.port} at {a.baud} baud", _device(a.port))
-            )
-        else:
-            host = f"{a.host}:{a.tcp_port}"
-            out.append(
-                Finding(
-                    f"antenna {a.id}: NMEA over TCP from {host}",
-                    "" if a.host else f"antenna {a.id}: no host",
-                )
-            )
+def service_problems(
+    manifest: Manifest, robot: Robot | None, deployed: DeployedField | None
+) -> list[tuple[str, str]]:
+    """(service, problem) for what a service would refuse at start although its
+    section decodes: settings checked against the robot (nav's follower limits) or the
+    field (the planner's budget). ``robot``/``deployed`` None: not checked against."""
+    out: list[tuple[str, str]] = []
+    sections = manifest.services
+    if "nav" in sections and robot is not None:
+        nav = decode_section(sections["nav"], NavConfig, "[services.nav]")
+        try:
+            check_limits(nav, robot)
+        except ConfigError as exc:
+            out.append(("nav", str(exc)))
+    if "planner" in sections and deployed is not None:
+        planner = decode_section(sections["planner"], PlannerConfig, "[services.planner]")
+        try:
+            check_budget(deployed.field, planner.budget)
+        except FieldError as exc:
+            out.append(("planner", f"field {manifest.field}: {exc}"))
     return out
 
 
-def _base(cfg: Any) -> list[Finding]:
-    if cfg.backend == "sim":
-        return [Finding("simulated base (from the sim service)")]
-    via = (
-        f"rmw_zenoh (domain {cfg.ros2_domain}, namespace {cfg.ros2_namespace})"
-        if cfg.ros2_layout == "rmw_zenoh"
-        else "zenoh-bridge-ros2dds"
-    )
-    return [
-        Finding(
-            f"ROS 2 topics through {via}: {cfg.ros2_cmd_vel} (Twist out), "
-            f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in), "
-            f"{cfg.ros2_imu} (Imu in)"
-        )
-    ]
-
-
-def _scanner(cfg: Any) -> list[Finding]:
-    if cfg.backend == "sim":
-        return [
-            Finding("simulated FARO on a virtual CAN bus in this process"),
-            Finding(f"scan files in {cfg.storage_dir}", _folder(cfg.storage_dir)),
-        ]
-    bus = f"CAN {cfg.interface} {cfg.channel} at {cfg.bitrate} bit/s"
-    problem = ""
-    if cfg.interface == "socketcan":
-        if not os.path.exists(f"/sys/class/net/{cfg.channel}"):
-            problem = f"{cfg.channel}: no such CAN interface (see `ip link show`)"
-    elif cfg.channel.startswith("/dev/"):  # slcan, serial: an adapter's tty
-        problem = _device(cfg.channel.split("@")[0])
-    # the scanner's card, mounted here: a scan is done only when its file is on it
-    card = _exists(cfg.storage_dir, "folder (is the scanner's card mounted?)")
-    return [Finding(bus, problem), Finding(f"scan files in {cfg.storage_dir}", card)]
-
-
-def _viz(cfg: Any) -> list[Finding]:
-    out = []
-    if cfg.serve:
-        out.append(
-            Finding(f"rerun gRPC on {cfg.bind}:{cfg.grpc_port}, web viewer on port {cfg.web_port}")
-        )
-    if cfg.save:
-        out.append(Finding(f"recording to {cfg.save}"))
-    return out or [Finding("no devices")]
-
-
-def _reach_sim(cfg: Any) -> list[Finding]:
-    out = []
-    for o in cfg.outputs:
-        if o.tcp_port is not None:
-            port = o.tcp_port or "a free port"
-            out.append(Finding(f"simulated Reach M2 {o.id}: NMEA TCP server on {cfg.host}:{port}"))
-        if o.pty:
-            out.append(Finding(f"simulated Reach M2 {o.id}: NMEA on a pseudo-terminal at {o.pty}"))
-    return out or [Finding("no outputs")]
-
-
-def _husky_sim(cfg: Any) -> list[Finding]:
-    return [
-        Finding(
-            f"simulated Husky driver: ROS 2 node {cfg.node_name} over rmw_zenoh, domain "
-            f"{cfg.domain_id}: {cfg.cmd_vel} in, {cfg.odom}, {cfg.scan} and {cfg.imu} out"
-        )
-    ]
-
-
-def _faro_sim(cfg: Any) -> list[Finding]:
-    return [
-        Finding(f"simulated FARO: SLCAN on a pseudo-terminal at {cfg.link}"),
-        Finding(f"scan files in {cfg.storage_dir}"),
-    ]
-
-
-DESCRIBE: dict[str, Callable[[Any], list[Finding]]] = {
-    "gnss": _gnss,
-    "base": _base,
-    "scanner": _scanner,
-    "viz": _viz,
-    "reach-sim": _reach_sim,
-    "husky-sim": _husky_sim,
-    "faro-sim": _faro_sim,
-}
-
-
-def _tls(tls: TlsConfig, machine: str) -> list[Finding]:
-    cert = Path(tls.certificate) if tls.certificate else None
-    key = Path(tls.private_key) if tls.private_key else None
-    problems = tls_problems(Path(tls.root_ca), cert, key, machine)
-    files = [tls.root_ca, tls.certificate, tls.private_key]
-    what = "mutual TLS with " if tls.mutual else "TLS with "
-    first = problems[0] if problems else ""
-    found = [Finding(what + ", ".join(f for f in files if f), first)]
-    return found + [Finding("", p) for p in problems[1:]]
-
-
-def _zenoh(zs: ZenohSettings) -> list[Finding]:
-    out = [
-        Finding(f"router listens on {', '.join(zs.listen)}"),
-        Finding(f"router connects to {', '.join(zs.connect) or 'nobody'}"),
-        Finding(f"services and the CLI reach it on {', '.join(zs.local_endpoints())}"),
-    ]
-    if zs.access is not None:
-        remotes = ", ".join(f"{cn} as {role}" for cn, role in sorted(zs.access.remotes.items()))
-        out.append(Finding(f"access control: default deny; remote machines: {remotes}"))
-    elif all(_loopback(e) for e in [*zs.listen, *zs.connect]):
-        out.append(Finding("no access control: open to this machine only (loopback)"))
-    else:
-        out.append(Finding("no access control: anyone who reaches the router may do anything"))
-    return out
-
-
-def _robot_ok(manifest: Manifest) -> bool:
-    try:
-        robot_path(manifest.robot)
-    except ConfigError:
-        return False
-    return True
-
-
-def describe(manifest: Manifest, path: Path) -> list[tuple[str, Finding]]:
-    """Every (section, finding) of a validated manifest, problems included."""
-    found = [("zenoh", f) for f in _zenoh(manifest.zenoh)]
-    if manifest.zenoh.tls is not None:
-        found += [("tls", f) for f in _tls(manifest.zenoh.tls, manifest.machine)]
-    field = Finding(manifest.field or "none")
-    try:
-        check_field(manifest, path)
-    except ConfigError as exc:
-        field = Finding(field.what, str(exc).removeprefix(f"{path}: field: "))
-    found.append(("field", field))
-    robot = Finding(str(robot_path(manifest.robot)) if _robot_ok(manifest) else manifest.robot)
-    try:
-        check_robot(manifest, path)
-    except ConfigError as exc:
-        robot = Finding(robot.what, str(exc).removeprefix(f"{path}: robot: "))
-    found.append(("robot", robot))
-    found.append(("run dir", Finding(manifest.run_dir, _folder(manifest.run_dir))))
-    for name, section in manifest.services.items():
-        where = f"[services.{name}]"
-        cfg = decode_section(section, config_type(name, where), where)
-        found += [(name, f) for f in DESCRIBE.get(name, lambda _: [Finding("no devices")])(cfg)]
-    return found
-
-
-def check(path: Path) -> tuple[list[str], list[str]]:
-    """``phenorover up --check``: (report lines, problem lines). Raises ConfigError
-    when the manifest itself is wrong."""
+def preflight(path: Path, field: str | None = None) -> tuple[Manifest, list[str]]:
+    """Everything checked before a deployment starts, as the launcher runs it; nothing
+    is opened or started. ``field`` replaces the manifest's field for every service
+    (``phenorover sim --field``). Returns the manifest as it will run and the notes for
+    its start-up lines (a field placed at the default origin). Raises ConfigError, one
+    line naming the file and the key."""
     manifest = validate(path)
-    found = describe(manifest, path)
-    width = max(len(s) for s, _ in found)
-    report = [f"{path}: machine {manifest.machine}"]
-    report += [
-        f"  {s:<{width}}  {f.what}" + ("  [MISSING]" if f.problem else "")
-        for s, f in found
-        if f.what
-    ]
-    problems = [f"{path}: {s}: {f.problem}" for s, f in found if f.problem]
-    return report, problems
+    if field is not None:
+        manifest = msgspec.structs.replace(manifest, field=field)
+    robot = check_robot(manifest, path)
+    deployed = check_field(manifest, path)
+    for _, problem in service_problems(manifest, robot, deployed):
+        raise ConfigError(f"{path}: {problem}")
+    return manifest, [deployed.note] if deployed is not None and deployed.note else []

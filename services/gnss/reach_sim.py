@@ -45,7 +45,7 @@ class _Schedule:
 class ReachSim:
     def __init__(self, ctx: Context, cfg: ReachSimConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
-        frame = load_frame(ctx.field)
+        frame = load_frame(ctx.field, ctx.clock)
         self.rovers = {
             o.id: ReachM2(cfg.rtk, cfg.seed, o.id, frame, cfg.talker) for o in cfg.outputs
         }

@@ -21,7 +21,7 @@ from services.gnss.solution import FixBuilder, heading
 class GnssService:
     def __init__(self, ctx: Context, cfg: GnssConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
-        self.frame = load_frame(ctx.field)
+        self.frame = load_frame(ctx.field, ctx.clock)
         self.compass = Compass.of(ctx.robot, cfg.compass)
         self.heading_pub = ctx.bus.publisher(keys.GNSS_HEADING)
         self.fix_pubs = {

@@ -44,7 +44,7 @@ class NavService:
         self.ctx, self.cfg = ctx, cfg
         check_limits(cfg, ctx.robot)
         self.mounts = Mounts.of(ctx.robot)
-        self.frame, fld = load_georeferenced(ctx.field)
+        self.frame, fld = load_georeferenced(ctx.field, ctx.clock)
         grow = cfg.route_margin_m
         self.route_box = fld.bounds + np.array([-grow, -grow, grow, grow])
         g = cfg.obstacle_crop_margin_m

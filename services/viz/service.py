@@ -123,7 +123,7 @@ class VizService:
 
     def _frame_of_field(self, source: str) -> FieldFrame | None:
         try:
-            return load_frame(source)
+            return load_frame(source, self.ctx.clock)
         except (FieldError, ValueError) as exc:
             self.log.warning("viz: no georeference for GNSS fixes until a plan arrives: %s", exc)
             return None

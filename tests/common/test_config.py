@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from common.config import ConfigError, apply_overrides, load_manifest
-from phenorover.launcher import validate
+from phenorover.preflight import validate
 from tests.conftest import REPO
 
 DEPLOY = REPO / "deploy"

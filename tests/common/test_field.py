@@ -10,8 +10,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from common.clock import SimClock, WallClock
 from common.field import FieldError, FieldLayout, build_field, load_field
-from common.field_geojson import field_frame, field_to_wgs84
+from common.field_geojson import (
+    DEFAULT_ORIGIN,
+    default_origin_note,
+    field_frame,
+    field_to_wgs84,
+    load_frame,
+    placed,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+NO_ORIGIN = REPO / "tests" / "data" / "no_origin.toml"
 
 
 @pytest.mark.parametrize(("name", "length", "width"), [("engr", 30.0, 20.0), ("spl", 20.0, 20.0)])
@@ -179,3 +190,44 @@ def test_field_wgs84_round_trip(x: float, y: float, bearing: float):
     fx, fy, _ = field_frame(layout).wgs84_to_field(lonlat[0, 1], lonlat[0, 0])
     assert float(fx) == pytest.approx(x, abs=1e-6)
     assert float(fy) == pytest.approx(y, abs=1e-6)
+
+
+def test_a_simulated_world_places_a_field_without_origin_at_engrs() -> None:
+    engr, _ = load_field("engr")
+    assert (engr.origin_lat, engr.origin_lon) == DEFAULT_ORIGIN  # somewhere real
+    layout, _ = load_field(NO_ORIGIN)
+    assert not layout.georeferenced
+    for clock in ("sim", SimClock()):  # a manifest's clock, or a service's
+        at = placed(layout, NO_ORIGIN, clock)
+        assert (at.origin_lat, at.origin_lon) == DEFAULT_ORIGIN
+        assert (at.origin_alt, at.row_bearing_deg) == (layout.origin_alt, layout.row_bearing_deg)
+    # every service that loads the frame on the sim clock gets the same one
+    frame = load_frame(str(NO_ORIGIN), SimClock())
+    assert frame.origin == (*DEFAULT_ORIGIN, 0.0)
+    assert frame.field_to_wgs84(0.0, 0.0)[:2] == pytest.approx(DEFAULT_ORIGIN, abs=1e-9)
+    note = default_origin_note(layout)
+    assert note.startswith("field 'h3' has no georeference: placed at the default origin")
+    assert "33.717028 N, 83.308083 W" in note and "simulation only" in note
+    # a field with its own origin keeps it, simulated or not
+    assert placed(engr, "engr", "sim") is engr
+
+
+@pytest.mark.parametrize("clock", [None, "wall", WallClock()])
+def test_a_real_deployment_refuses_a_field_without_origin_naming_file_and_keys(
+    clock: object,
+) -> None:
+    with pytest.raises(FieldError) as err:
+        load_frame(str(NO_ORIGIN), clock)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith(f"{NO_ORIGIN}: field 'h3' has no georeference")
+    assert "origin_lat, origin_lon are not set" in text
+
+
+def test_half_an_origin_is_refused_even_in_simulation(tmp_path: Path) -> None:
+    half = tmp_path / "half.toml"
+    half.write_text(NO_ORIGIN.read_text() + "origin_lat = 40.0\n")
+    layout, _ = load_field(half)
+    with pytest.raises(
+        FieldError, match=r"half\.toml: field 'h3': origin_lat is set but origin_lon"
+    ):
+        placed(layout, half, "sim")

@@ -1,8 +1,9 @@
 """``phenorover sim --field`` on a field of its own: a GeoJSON field (not ENGR, not
 the manifest's field, elsewhere on the globe, rows at 30 deg) is the field of the whole
 deployment, the simulated world included, and its survey scans every location (exit
-0); with an obstacle on the route a location is skipped and the command says which
-and why and exits 1."""
+0); so does a TOML field with no georeference, placed at the default origin; with an
+obstacle on the route a location is skipped and the command says which and why and
+exits 1."""
 
 from __future__ import annotations
 
@@ -18,10 +19,12 @@ from common.field_geojson import field_from_geojson
 from common.geo import FieldFrame
 from services.mission.log import MissionLog
 from services.planner.core import plan
-from tests.conftest import Procs, free_port
+from tests.conftest import REPO, Procs, free_port
 from tests.integration.test_mission import TEST_HZ
 
 ROWS_BEARING_DEG = 30.0
+# one row of three plots, no origin_lat/origin_lon
+NO_ORIGIN = REPO / "tests" / "data" / "no_origin.toml"
 MINI = FieldLayout(
     name="mini",
     rows=2,
@@ -52,13 +55,19 @@ def mini_geojson() -> dict[str, Any]:
 
 
 def run_sim(
-    procs: Procs, tmp: Path, sim: str = "", extra: str = "", follower: str = ""
+    procs: Procs,
+    tmp: Path,
+    sim: str = "",
+    extra: str = "",
+    follower: str = "",
+    field: Path | None = None,
 ) -> tuple[int, str, Path]:
-    """``phenorover sim --field mini.geojson`` on a fast deployment; ``sim``: lines of
-    the simulator's section, ``extra``: after the mission's, ``follower``: the route
-    follower's. Exit code, output, runs."""
-    field = tmp / "mini.geojson"
-    field.write_text(json.dumps(mini_geojson()))
+    """``phenorover sim --field mini.geojson`` (or ``field``) on a fast deployment;
+    ``sim``: lines of the simulator's section, ``extra``: after the mission's,
+    ``follower``: the route follower's. Exit code, output, runs."""
+    if field is None:
+        field = tmp / "mini.geojson"
+        field.write_text(json.dumps(mini_geojson()))
     runs = tmp / "runs"
     manifest = tmp / "m.toml"
     # the manifest names ENGR: --field must replace it for every service
@@ -125,6 +134,22 @@ def test_a_geojson_field_of_our_own_is_surveyed_end_to_end(procs: Procs, tmp_pat
     assert len(list((tmp_path / "card").rglob("*.e57"))) == 3
     steps = MissionLog(runs / summary[1] / "mission.db").steps()
     assert [s.status for s in steps] == ["done"] * 3
+
+
+def test_a_toml_field_without_georeference_is_surveyed_at_the_default_origin(
+    procs: Procs, tmp_path: Path
+) -> None:
+    code, out, runs = run_sim(procs, tmp_path, field=NO_ORIGIN)
+    assert code == 0, out[-3000:]
+    placed = "field 'h3' has no georeference: placed at the default origin 33.717028 N, 83.308083 W"
+    assert placed in out, out[:3000]
+    summary = re.search(r"summary: (\S+): done, (\d+)/(\d+) scans done, 0 failed", out)
+    assert summary is not None, out[-3000:]
+    assert summary[2] == summary[3] and int(summary[3]) >= 2, summary[0]
+    assert re.search(r"sim \| .*world: field h3 \(.*no_origin\.toml\), 3 plots", out), out[:3000]
+    assert "exited with code" not in out  # no service refused the field and was restarted
+    steps = MissionLog(runs / summary[1] / "mission.db").steps()
+    assert [s.status for s in steps] == ["done"] * int(summary[3])
 
 
 def test_a_skipped_location_ends_the_command_with_exit_1_naming_it(
