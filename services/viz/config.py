@@ -10,8 +10,8 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """The live rerun dashboard. Any combination of the three outputs may be on.
 
     ``serve``: host rerun's gRPC server on ``bind``:``grpc_port`` and, unless
-    ``web_port`` is 0, the web viewer on ``web_port`` (rerun binds the web viewer on
-    every interface). ``advertise`` is the host name browsers reach this machine by,
+    ``web_port`` is 0, the web viewer on ``bind``:``web_port`` (served by rerun's CLI
+    as a child process). ``advertise`` is the host name browsers reach this machine by,
     put into the viewer link (default: ``bind``, or this machine's name when ``bind``
     is 0.0.0.0). ``server_memory_limit`` bounds what the server keeps for viewers that
     connect late (oldest data goes first, static data stays).

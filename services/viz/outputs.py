@@ -6,26 +6,39 @@ viewer), a viewer we connect to, and a fixed ``save`` path. A ``save`` path hold
 and closed (footer written) when the next starts or the service stops.
 
 The rerun SDK does its encoding and I/O on its own threads; ``log`` only hands data
-over. Rerun's analytics live in its viewers, never in the SDK: the native viewer
-reads them from ``rerun analytics disable``, the web viewer from the browser.
+over. Every server listens on ``bind``: the gRPC server is the SDK's, the web viewer is
+served by rerun's CLI (:class:`WebViewer`). Rerun's analytics live in its viewers, never
+in the SDK: the native viewer reads them from ``rerun analytics disable``, the web
+viewer from the browser; the CLI serving the web viewer runs with them off.
 """
 
 from __future__ import annotations
 
+import contextlib
+import importlib.util
 import logging
+import os
+import re
 import socket
+import subprocess
+import tempfile
 import threading
+import time
 from collections.abc import Iterable
 from pathlib import Path
 from urllib.parse import quote
 
 import rerun as rr
 
+from common.process import die_with_parent
 from services.viz.config import VizConfig
 from services.viz.scene import Entry, blueprint
 
 APP_ID = "phenorover"
 TIMELINE = "time"
+# where this machine's own processes reach a server bound to a wildcard address
+LOCAL = {"0.0.0.0": "127.0.0.1", "::": "::1"}
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 log = logging.getLogger("viz")
 
@@ -39,6 +52,96 @@ def port_free(host: str, port: int) -> bool:
         except OSError:
             return False
     return True
+
+
+def rerun_cli() -> Path | None:
+    """rerun's command-line program, installed with rerun-sdk (package ``rerun_cli``)."""
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is None or spec.origin is None:
+        return None
+    exe = Path(spec.origin).parent / "rerun"
+    return exe if exe.is_file() else None
+
+
+class WebViewer:
+    """Rerun's web viewer (its HTML and Wasm over HTTP) on ``bind``:``port``, linked to
+    the gRPC server at ``connect_to``. The SDK's ``rr.serve_web_viewer`` takes no address
+    and listens on every interface, so the viewer is served by rerun's own CLI
+    (``rerun --serve-web --bind``): a child process that gets SIGTERM when this one
+    dies. It starts with a rerun config directory of its own, analytics disabled, so
+    serving the viewer sends no usage data, as the SDK sends none; the CLI reads that
+    config as it starts, and the directory is removed once the viewer listens.
+
+    Blocks until the viewer accepts connections; raises OSError when it cannot start
+    within ``timeout_s`` (the CLI missing, the address taken), naming why."""
+
+    def __init__(self, bind: str, port: int, connect_to: str, timeout_s: float = 10.0) -> None:
+        exe = rerun_cli()
+        if exe is None:
+            raise OSError("rerun's CLI (rerun_cli/rerun, part of rerun-sdk) is not installed")
+        if not port_free(bind, port):  # else the readiness check would find the other
+            raise OSError(f"{bind}:{port} is in use")
+        self._said: list[str] = []
+        with tempfile.TemporaryDirectory(prefix="viz-rerun-") as home:
+            env = dict(os.environ, XDG_CONFIG_HOME=home, XDG_DATA_HOME=home, RUST_LOG="warn")
+            null = subprocess.DEVNULL
+            try:
+                subprocess.run(
+                    [str(exe), "analytics", "disable"],
+                    env=env,
+                    stdin=null,
+                    stdout=null,
+                    stderr=null,
+                    timeout=timeout_s,
+                    check=True,
+                )
+            except subprocess.SubprocessError as exc:
+                raise OSError(f"rerun analytics disable: {exc}") from None
+            cmd = [str(exe), "--serve-web", "--bind", bind, "--web-viewer-port", str(port)]
+            self.proc = subprocess.Popen(
+                [*cmd, connect_to],
+                env=env,
+                stdin=null,
+                stdout=null,
+                stderr=subprocess.PIPE,
+                preexec_fn=die_with_parent,
+            )
+            self._pump = threading.Thread(target=self._read, daemon=True, name="viz-web-log")
+            self._pump.start()
+            ready = self._wait(LOCAL.get(bind, bind), port, timeout_s)
+        if not ready:
+            self.close()
+            said = "; ".join(self._said[-3:]) or f"not listening after {timeout_s:g} s"
+            raise OSError(f"rerun --serve-web on {bind}:{port}: {said}")
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for raw in self.proc.stderr:
+            line = _ANSI.sub("", raw.decode(errors="replace")).strip()
+            if line:
+                self._said.append(line)
+                log.warning("viz: web viewer: %s", line)
+
+    def _wait(self, host: str, port: int, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                self._pump.join(timeout=1.0)  # what it said before it exited
+                return False
+            with contextlib.suppress(OSError), socket.create_connection((host, port), 0.2):
+                return True
+            time.sleep(0.05)  # a poll period: the CLI is starting
+        return False
+
+    def close(self) -> None:
+        """Stop the viewer's process (it holds no data)."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=1.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
 
 
 def save_path(template: str, run_dir: Path, mission: str) -> Path:
@@ -61,6 +164,7 @@ class Outputs:
         self.mission_stream: rr.RecordingStream | None = None
         self.mission = ""
         self.viewer_url = ""
+        self.web: WebViewer | None = None
         self._lock = threading.Lock()
 
     def start(self) -> None:
@@ -93,14 +197,16 @@ class Outputs:
 
     def _serve_web(self, grpc_uri: str) -> None:
         cfg = self.cfg
-        host = cfg.advertise or (socket.gethostname() if cfg.bind == "0.0.0.0" else cfg.bind)
+        host = cfg.advertise or (socket.gethostname() if cfg.bind in LOCAL else cfg.bind)
         url = grpc_uri.replace("127.0.0.1", host).replace("0.0.0.0", host)
-        if cfg.web_port and port_free("0.0.0.0", cfg.web_port):
-            rr.serve_web_viewer(web_port=cfg.web_port, open_browser=False, connect_to=url)
-            self.viewer_url = f"http://{host}:{cfg.web_port}/?url={quote(url, safe='')}"
-            log.info("viz: web viewer at %s", self.viewer_url)
-        elif cfg.web_port:
-            log.error("viz: cannot serve the web viewer: port %d is in use", cfg.web_port)
+        if cfg.web_port:
+            try:
+                self.web = WebViewer(cfg.bind, cfg.web_port, url)
+            except OSError as exc:
+                log.error("viz: cannot serve the web viewer: %s", exc)
+            else:
+                self.viewer_url = f"http://{host}:{cfg.web_port}/?url={quote(url, safe='')}"
+                log.info("viz: web viewer at %s", self.viewer_url)
         log.info("viz: live data at %s (rerun --connect %s)", url, url)
 
     def open_mission(self, mission: str) -> bool:
@@ -142,7 +248,10 @@ class Outputs:
             rec.log(e.path, e.item, static=True)
 
     def close(self) -> None:
-        """Flush and close every stream (writes the .rrd footers)."""
+        """Stop the web viewer; flush and close every stream (writes the .rrd footers)."""
+        if self.web is not None:
+            self.web.close()
+            self.web = None
         for rec in self.streams():
             rec.flush()
             rec.disconnect()
