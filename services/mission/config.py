@@ -54,6 +54,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     rpc_timeout_s: Pos = 5.0
     rpc_patience_s: Pos = 120.0
     scanner_lost_s: Pos = 10.0
+    nav_lost_s: Pos = 5.0
     plan_timeout_s: Pos = 300.0
     scan_pose: Literal["end", "mean"] = "end"
     return_to_origin: bool = True

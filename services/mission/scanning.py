@@ -95,6 +95,7 @@ class Scans:
         once recorded from such a DONE while the real one was taken on the drive to the
         next location)."""
         t0 = seen = self.sv.now()
+        heard_ns = since_ns  # the scanner's stamp of the newest status taken as heard
         while True:
             paused = self.sv.wait(0.2)
             t0, seen = t0 + paused, seen + paused
@@ -102,17 +103,24 @@ class Scans:
             if (now - t0) / NS > self.sv.cfg.scan_timeout_s:
                 self.stop()
                 return f"no end in {self.sv.cfg.scan_timeout_s:.0f} s"
+            if self.sv.pose_age_s() > (lost := self.sv.cfg.nav_lost_s):
+                self.stop()
+                return (
+                    f"no pose from navigation for {lost:.0f} s: the pose over the scan is unknown"
+                )
             st = self.sv.scanner.get()
-            # a status from before this attempt (a retry follows an error for the
-            # same scan id) says nothing about it
-            stale = st is not None and st.stamp_ns <= since_ns
-            if st is None or stale or st.scan_id != step.scan_id:
+            # Only a status stamped after the last one heard is word from the scanner:
+            # one from before this attempt (a retry follows an error for the same scan
+            # id) says nothing about it, and the newest status held is held forever
+            # by a scanner that hangs (or whose link drops) while "scanning".
+            fresh = st is not None and st.stamp_ns > heard_ns
+            if not fresh or st is None or st.scan_id != step.scan_id:
                 if (now - seen) / NS > self.sv.cfg.scanner_lost_s:
                     self.stop()  # a device still scanning would refuse the retry
                     lost = self.sv.cfg.scanner_lost_s
                     return f"scanner lost the scan (no status for it in {lost:.0f} s)"
                 continue
-            seen = now
+            seen, heard_ns = now, st.stamp_ns
             if st.state == ScannerState.ERROR:
                 # the service gave up on the scan (stuck, silent); the device may still
                 # be taking it, and would refuse the next one as busy

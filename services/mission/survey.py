@@ -87,6 +87,7 @@ class Survey:
         self._lock = threading.Lock()
         self._collect: list[PoseEstimate] | None = None
         self._last_pose: PoseEstimate | None = None
+        self._pose_at = self.now()  # when the newest pose arrived, on this clock
         self.distance = 0.0  # metres driven since this survey (or its resumption) began
         feeds.on_pose = self._on_pose  # the previous survey, ended, hears no more
         self.detail = ""
@@ -94,7 +95,9 @@ class Survey:
         self.scans = Scans(self)
 
     def _on_pose(self, p: PoseEstimate) -> None:
+        at = self.now()
         with self._lock:
+            self._pose_at = max(self._pose_at, at)
             if self._collect is not None:
                 self._collect.append(p)
             # distance driven, measured: the estimate's speed (odometry-borne, zero
@@ -103,6 +106,12 @@ class Survey:
                 dt = min((p.stamp_ns - self._last_pose.stamp_ns) / NS, 1.0)
                 self.distance += abs(p.v) * dt
             self._last_pose = p
+
+    def pose_age_s(self) -> float:
+        """How long since navigation last said where the robot is, on this clock: the
+        newest pose held says nothing of a navigation that has since hung."""
+        with self._lock:
+            return (self.now() - self._pose_at) / NS
 
     def collect(self, poses: list[PoseEstimate] | None) -> None:
         """Collect every pose from now on after ``poses`` (None: stop collecting)."""
@@ -245,14 +254,19 @@ class Survey:
         noise). Returns the newest pose, or None after ``settle_timeout_s``."""
         window: list[PoseEstimate] = []
         t0 = self.now()
-        warned = False
+        warned = silent = False
         while True:
             t0 += self.wait(0.1)
             now = self.now()
             if (now - t0) / NS > self.cfg.settle_timeout_s:
                 return None
             p = self.pose.get()
-            if p is None:
+            if p is None or (window and p.stamp_ns <= window[-1].stamp_ns):
+                # nothing new: a navigation that hangs is not a robot standing still
+                age = self.pose_age_s()
+                if age > self.cfg.nav_lost_s and not silent:
+                    self.event("warning", f"no pose from navigation for {age:.0f} s: waiting")
+                silent = age > self.cfg.nav_lost_s
                 continue
             if not p.localized:
                 if not warned:

@@ -29,7 +29,7 @@ import pytest
 from common import keys
 from common.clock import WallClock
 from common.messages.nav import PoseEstimate
-from common.messages.scan import ScannerReply, ScannerState, ScannerStatus, StartScan
+from common.messages.scan import ScannerReply, ScannerState, ScannerStatus, StartScan, StopScan
 from common.missionlog import Step
 from common.service import Context
 from common.transport import Bus
@@ -57,8 +57,11 @@ class OffsetScanner:
         off_m: float = 0.0,
         late_s: float = 1.0,
         scan_s: float = 1.0,
+        hangs: str = "",
     ) -> None:
-        self.bus, self.late_s, self.scan_s = bus, late_s, scan_s
+        """``hangs``: ``scanner`` or ``nav`` falls silent once the scan is under way
+        (SIGSTOP, or a link that drops): its newest message stays the newest held."""
+        self.bus, self.late_s, self.scan_s, self.hangs = bus, late_s, scan_s, hangs
         self.offset_ns, self.off_m = offset_ns, off_m
         self.replied_ns: int | None = None  # the scanner's stamp of its answer
         self.replied_wall = 0.0
@@ -77,6 +80,8 @@ class OffsetScanner:
         return time.time_ns() + self.offset_ns
 
     def _command(self, cmd: object) -> ScannerReply:
+        if isinstance(cmd, StopScan):  # a lost attempt is stopped
+            return ScannerReply(ok=True, stamp_ns=self.now())
         assert isinstance(cmd, StartScan), cmd
         self.replied_wall = time.monotonic()
         self.replied_ns = self.now()
@@ -100,9 +105,13 @@ class OffsetScanner:
 
     def _run(self) -> None:
         while not self.stop.wait(0.05):
-            self._status.put(self.status())
-            pose = PoseEstimate(x=X + self.off_m, y=Y, yaw=0.0, localized=True)
-            self._pose.put(msgspec.structs.replace(pose, stamp_ns=self.now()))
+            st = self.status()
+            hung = st.state == ScannerState.SCANNING and st.progress > 0.01
+            if not (hung and self.hangs == "scanner"):  # else its last SCANNING is held
+                self._status.put(st)
+            if not (hung and self.hangs == "nav"):
+                pose = PoseEstimate(x=X + self.off_m, y=Y, yaw=0.0, localized=True)
+                self._pose.put(msgspec.structs.replace(pose, stamp_ns=self.now()))
 
 
 @pytest.fixture
@@ -111,7 +120,9 @@ def scanner_bus(router_endpoint: str) -> Iterator[Bus]:
         yield bus
 
 
-def retry(bus: Bus, tmp_path: Path, scanner: OffsetScanner) -> tuple[str, Step, list[str]]:
+def retry(
+    bus: Bus, tmp_path: Path, scanner: OffsetScanner, cfg: MissionConfig | None = None
+) -> tuple[str, Step, list[str]]:
     """The retry of scan 1 at (X, Y): why it failed ("" if not) and its step after."""
     log = MissionLog(tmp_path / "mission.db")
     log.create("m", "tiny", 0, "{}", [(1, 0, X, Y, 0.0)])
@@ -121,11 +132,12 @@ def retry(bus: Bus, tmp_path: Path, scanner: OffsetScanner) -> tuple[str, Step, 
     ctx = Context("mission", "test", bus, WallClock(), logging.getLogger("t"), tmp_path)
     wake, abort, paused = threading.Event(), threading.Event(), threading.Event()
     report = lambda lv, t: events.append(f"{lv}: {t}")  # noqa: E731
-    survey = Survey(ctx, MissionConfig(), Feeds(bus), log, "m", report, wake, abort, paused)
+    cfg = cfg or MissionConfig()
+    survey = Survey(ctx, cfg, Feeds(bus), log, "m", report, wake, abort, paused)
     try:
         seen = survey.scanner.wait_for(lambda s: s.file == "first.e57", timeout=10)
         assert seen is not None, "the scanner's status never reached the mission"
-        why = survey.scans.scan(log.steps()[0], MissionConfig().profile)
+        why = survey.scans.scan(log.steps()[0], cfg.profile)
         return why, log.steps()[0], events
     finally:
         scanner.close()
@@ -154,4 +166,27 @@ def test_a_scan_taken_off_the_plan_is_not_left_for_a_restart_to_take(
     why, step, events = retry(client_bus, tmp_path, scanner)
     assert "not recorded as done" in why, (why, events)
     # "scanning" would let a restarted mission record the scanner's DONE of it
+    assert step.status == "driving", step
+
+
+@pytest.mark.parametrize(
+    ("hangs", "why"),
+    [
+        ("scanner", "scanner lost the scan (no status for it in 1 s)"),
+        ("nav", "no pose from navigation for 1 s: the pose over the scan is unknown"),
+    ],
+)
+def test_a_peer_that_hangs_mid_scan_is_noticed_by_the_age_of_what_it_said(
+    client_bus: Bus, scanner_bus: Bus, tmp_path: Path, hangs: str, why: str
+) -> None:
+    """A scanner or navigation that hangs mid-scan leaves its last word the newest
+    held; the attempt is lost within the deadline, not at the scan's 30-minute limit."""
+    scanner = OffsetScanner(scanner_bus, 0, late_s=0.2, scan_s=60.0, hangs=hangs)
+    cfg = MissionConfig(scanner_lost_s=1.0, nav_lost_s=1.0, rpc_timeout_s=1.0)
+    t0 = time.monotonic()
+    got, step, events = retry(client_bus, tmp_path, scanner, cfg)
+    assert got == why, events
+    # the scan is 60 s long: lost after its deadline (1 s) and the stop call to a
+    # scanner that may not answer (rpc_timeout_s, 1 s), not at its end
+    assert time.monotonic() - t0 < 30.0
     assert step.status == "driving", step
