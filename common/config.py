@@ -13,7 +13,7 @@ import json
 import re
 import tomllib
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
 import zenoh
@@ -84,7 +84,10 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     and the launcher refuses a manifest whose services need one, so a robot never
     surveys an example field by accident. ``robot`` is the robot description
     (:mod:`common.robot`): a file, or the name of a shipped one; empty (the default)
-    is the shipped Husky A200, ``common/robots/husky.toml``."""
+    is the shipped Husky A200, ``common/robots/husky.toml``. ``hung_after_s``: a
+    service whose process lives but whose heartbeat (``health/<service>``, once a
+    second) has been silent this long (wall time) is taken for hung, killed and
+    restarted by the launcher, as one that died."""
 
     machine: str
     field: str = ""
@@ -94,6 +97,7 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     # service name -> its config section, decoded by the service's own Config type
     services: dict[str, dict[str, Any]] = msgspec.field(default_factory=dict)
     run_dir: str = "runs"
+    hung_after_s: Annotated[float, msgspec.Meta(ge=3.0, le=600.0)] = 10.0
 
 
 # Keys that left the service sections for the robot description (common/robot.py):

@@ -88,7 +88,7 @@ def _base(cfg: Any) -> list[Finding]:
     )
     return [
         Finding(
-            f"ROS 2 topics through {via}: {cfg.ros2_cmd_vel} (Twist out), "
+            f"ROS 2 topics through {via}: {cfg.ros2_cmd_vel} ({cfg.ros2_cmd_vel_type} out), "
             f"{cfg.ros2_odom} (Odometry in), {cfg.ros2_scan} (LaserScan in), "
             f"{cfg.ros2_imu} (Imu in)"
         )
@@ -117,7 +117,9 @@ def _viz(cfg: Any) -> list[Finding]:
     out = []
     if cfg.serve:
         out.append(
-            Finding(f"rerun gRPC on {cfg.bind}:{cfg.grpc_port}, web viewer on port {cfg.web_port}")
+            Finding(
+                f"rerun gRPC on {cfg.bind}:{cfg.grpc_port}, web viewer on {cfg.bind}:{cfg.web_port}"
+            )
         )
     if cfg.save:
         out.append(Finding(f"recording to {cfg.save}"))

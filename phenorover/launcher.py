@@ -3,8 +3,10 @@
 The launcher hosts this machine's Zenoh router, starts each service as its own
 process (``python -m services.<name> --manifest M``, or the module
 ``services.MODULES`` names), prefixes their output with the
-service name, restarts a service that dies (exponential backoff, logged), and on
-stop sends SIGTERM to all and SIGKILL to whatever is left after ``grace_s``.
+service name, restarts a service that dies (exponential backoff, logged), kills and
+restarts one that hangs (its heartbeat silent for the manifest's ``hung_after_s``,
+:mod:`phenorover.watchdog`), and on stop sends SIGTERM to all and SIGKILL to
+whatever is left after ``grace_s``.
 
 Everything is checked before anything starts (:mod:`phenorover.preflight`):
 a manifest that names a missing field or mistyped key is one error line, never a
@@ -27,11 +29,13 @@ from typing import IO, Any
 
 import zenoh
 
+from common import keys
 from common.acl import LOG_TARGET, DenialLog, router_acl
 from common.config import ConfigError, Manifest, decode_section, zenoh_config
 from common.process import die_with_parent
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
 from phenorover.preflight import preflight
+from phenorover.watchdog import HeartbeatWatch
 from services import SERVICES, module_of
 from services.base.config import BaseConfig
 
@@ -126,6 +130,7 @@ class Launcher:
         self._router: zenoh.Session | None = None
         self._monitor: threading.Thread | None = None
         self._denials: StdoutFilter | None = None
+        self.heartbeats = HeartbeatWatch(self.manifest.machine, self.manifest.hung_after_s)
 
     def _print(self, name: str, line: str) -> None:
         with self._out_lock:
@@ -176,6 +181,10 @@ class Launcher:
         )
         for child in self.children.values():
             self._spawn(child)
+        self._router.declare_subscriber(
+            keys.HEALTH.key.replace("{service}", "*"),
+            lambda sample: self.heartbeats.on_sample(sample.payload.to_bytes(), time.monotonic()),
+        )
         self._monitor = threading.Thread(target=self._watch, daemon=True)
         self._monitor.start()
 
@@ -184,7 +193,10 @@ class Launcher:
             now = time.monotonic()
             for child in self.children.values():
                 proc = child.proc
+                if proc is not None and proc.poll() is None:
+                    self._kill_if_hung(child, proc, now)
                 if proc is not None and proc.poll() is not None:
+                    self.heartbeats.forget(proc.pid)
                     if self._stopping.is_set():
                         return
                     if now - child.started_at > 60.0:
@@ -202,6 +214,19 @@ class Launcher:
                     child.restarts += 1
                     log.warning("restarting service %s (restart %d)", child.name, child.restarts)
                     self._spawn(child)
+
+    def _kill_if_hung(self, child: Child, proc: subprocess.Popen[bytes], now: float) -> None:
+        silent = self.heartbeats.silent_for(proc.pid, now)
+        if silent is None:
+            return
+        log.warning(
+            "service %s (pid %d) has not been heard for %.1f s: hung, killing it",
+            child.name,
+            proc.pid,
+            silent,
+        )
+        proc.kill()  # SIGKILL ends a stopped process too; its exit restarts it below
+        proc.wait()
 
     def pids(self) -> dict[str, int]:
         return {n: c.proc.pid for n, c in self.children.items() if c.proc is not None}

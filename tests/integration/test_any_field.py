@@ -111,6 +111,7 @@ max_speed = 0.3
 [services.planner]
 [services.mission]
 lease_s = 8.0
+nav_lost_s = 20.0
 settle_s = 1.0
 register_on_done = false
 {extra}""")

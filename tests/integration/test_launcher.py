@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -212,3 +213,34 @@ def test_a_command_whose_service_is_not_alive_says_so_at_once(router_endpoint: s
         assert (
             len(lines) == 1 and f"no {service} service alive behind {router_endpoint}" in lines[0]
         )
+
+
+def test_up_kills_and_restarts_a_hung_service(procs: Procs, tmp_path: Path) -> None:
+    """A service stopped by SIGSTOP keeps its process (and for a while its liveliness
+    token): its silent heartbeat gives it away, and it is replaced as a dead one is."""
+    port = free_port()
+    manifest = write_manifest(tmp_path, port)
+    manifest.write_text("hung_after_s = 3.0\n" + manifest.read_text())
+    log = tmp_path / "up.log"
+    procs.start("-m", "phenorover", "up", str(manifest), log=log)
+    session = zenoh.open(zenoh_config("client", [], [f"tcp/127.0.0.1:{port}"]))
+    try:
+        seen = wait_alive(session, {"gnss"}, timeout=30).seen
+        hung = next(a.pid for a in seen if a.service == "gnss")
+        # judged only once heard: a heartbeat of it on the bus has reached the router
+        beat = threading.Event()
+        sub = session.declare_subscriber("phenorover/health/gnss", lambda _s: beat.set())
+        assert beat.wait(10), "no heartbeat from gnss"
+        sub.undeclare()
+        os.kill(hung, signal.SIGSTOP)
+        deadline = time.monotonic() + 30
+        new_pid = None
+        while new_pid is None:
+            assert time.monotonic() < deadline, "the hung service was not replaced"
+            for a in wait_alive(session, {"gnss"}, timeout=2).seen:
+                if a.service == "gnss" and a.pid != hung:
+                    new_pid = a.pid
+        assert not pid_alive(hung), "the hung process was left behind"
+        assert f"service gnss (pid {hung}) has not been heard for" in log.read_text()
+    finally:
+        session.close()

@@ -70,7 +70,8 @@ class Deployment:
         wall = 0.0 if field_timers else rtf
         watchdog = f"watchdog_s = {0.05 * wall}" if wall else ""
         fix_age = f"max_fix_age_s = {0.15 * wall}" if wall else ""
-        lease = f"lease_s = {1.0 * wall}" if wall else ""
+        # a route lease and navigation's silence during a scan: a second of wall time
+        lease = f"lease_s = {1.0 * wall}\nnav_lost_s = {1.0 * wall}" if wall else ""
         manifest.write_text(f"""machine = "test"
 clock = "sim"
 field = "{TINY}"
