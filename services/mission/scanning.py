@@ -104,10 +104,8 @@ class Scans:
                 self.stop()
                 return f"no end in {self.sv.cfg.scan_timeout_s:.0f} s"
             if self.sv.pose_age_s() > (lost := self.sv.cfg.nav_lost_s):
-                self.stop()
-                return (
-                    f"no pose from navigation for {lost:.0f} s: the pose over the scan is unknown"
-                )
+                why = f"no pose from navigation for {lost:.0f} s: the pose over the scan is unknown"
+                return self._give_up(step, why)
             st = self.sv.scanner.get()
             # Only a status stamped after the last one heard is word from the scanner:
             # one from before this attempt (a retry follows an error for the same scan
@@ -115,10 +113,9 @@ class Scans:
             # by a scanner that hangs (or whose link drops) while "scanning".
             fresh = st is not None and st.stamp_ns > heard_ns
             if not fresh or st is None or st.scan_id != step.scan_id:
-                if (now - seen) / NS > self.sv.cfg.scanner_lost_s:
-                    self.stop()  # a device still scanning would refuse the retry
-                    lost = self.sv.cfg.scanner_lost_s
-                    return f"scanner lost the scan (no status for it in {lost:.0f} s)"
+                if (now - seen) / NS > (lost := self.sv.cfg.scanner_lost_s):
+                    why = f"scanner lost the scan (no status for it in {lost:.0f} s)"
+                    return self._give_up(step, why)
                 continue
             seen, heard_ns = now, st.stamp_ns
             if st.state == ScannerState.ERROR:
@@ -129,6 +126,13 @@ class Scans:
                 return f"scanner error: {st.error}"
             if st.state == ScannerState.DONE:
                 return self.record(step, st, self.sv.collected())
+
+    def _give_up(self, step: Step, why: str) -> str:
+        """Give the attempt up for ``why``, said at once: the stop that follows waits up
+        to ``rpc_timeout_s`` on a scanner that may not answer (it hangs)."""
+        self.sv.event("warning", f"scan {step.scan_id}: {why}; stopping the scanner")
+        self.stop()  # a device still scanning would refuse the retry
+        return why
 
     def record(self, step: Step, st: ScannerStatus, poses: list[PoseEstimate]) -> str:
         """Record the scan as done if the pose over it was where planned: its mean

@@ -34,11 +34,13 @@ REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
 from phenorover.eval.results import BENCH_DIR  # noqa: E402
-from tests.bench.fault_cases import CASES as FAULTS  # noqa: E402
+from tests.bench.fault_cases import CASES as KILLS  # noqa: E402
+from tests.bench.freeze_cases import CASES as FREEZES  # noqa: E402
+from tests.bench.injected_faults import FAULTS  # noqa: E402
 from tests.bench.partition_case import CASE as PARTITION  # noqa: E402
 from tests.conftest import Procs  # noqa: E402
 
-CASES = [*FAULTS, PARTITION]
+CASES = [*KILLS, *FAULTS, *FREEZES, PARTITION]
 
 
 @dataclasses.dataclass
