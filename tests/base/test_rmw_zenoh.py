@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -19,7 +18,6 @@ from zenoh_ros2_sdk.attachment import Attachment as SdkAttachment
 from zenoh_ros2_sdk.entity import EndpointEntity, EntityKind, NodeEntity
 from zenoh_ros2_sdk.keyexpr import endpoint_liveliness_keyexpr, node_liveliness_keyexpr
 
-from common.config import zenoh_config
 from common.ros2 import msgs as ros
 from common.ros2 import wire
 from common.ros2.node import Ros2Node
@@ -204,15 +202,6 @@ def test_imu_cdr_is_rosbags_cdr() -> None:
     assert bytes(JAZZY.serialize_cdr(back, IMU.name)) == data
     again = IMU.decode(bytes(JAZZY.serialize_cdr(back, IMU.name)))
     assert ros.euler_of(again.orientation) == pytest.approx((0.1, -0.2, 3.0), abs=1e-12)
-
-
-@pytest.fixture
-def two_sessions(router_endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    a = zenoh.open(zenoh_config("peer", ["tcp/127.0.0.1:0"], [router_endpoint]))
-    b = zenoh.open(zenoh_config("peer", ["tcp/127.0.0.1:0"], [router_endpoint]))
-    yield a, b
-    b.close()
-    a.close()
 
 
 def test_node_drops_bad_samples_and_keeps_going(

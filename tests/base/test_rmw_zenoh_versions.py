@@ -7,14 +7,13 @@ from __future__ import annotations
 import logging
 import struct
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 
 import pytest
 import xxhash
 import zenoh
 import zenoh.ext as zext
 
-from common.config import zenoh_config
 from common.ros2 import msgs as ros
 from common.ros2 import wire
 from common.ros2.node import Ros2Node
@@ -97,15 +96,6 @@ def test_old_attachment_is_named() -> None:
     # a new-format attachment with any sequence number still decodes
     big = wire.Attachment(2**62, 5, gid)
     assert wire.Attachment.decode(big.encode()) == big
-
-
-@pytest.fixture
-def two_sessions(router_endpoint: str) -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
-    a = zenoh.open(zenoh_config("peer", ["tcp/127.0.0.1:0"], [router_endpoint]))
-    b = zenoh.open(zenoh_config("peer", ["tcp/127.0.0.1:0"], [router_endpoint]))
-    yield a, b
-    b.close()
-    a.close()
 
 
 def test_node_reports_an_old_peer_once(

@@ -117,18 +117,29 @@ def wait_driving(d: Deployment, scan: int) -> None:
     assert got is not None, "never drove toward the location"
 
 
+def survey_deployment(procs: Procs, tmp: Path, service: str) -> Deployment:
+    """The deployment a case of ``service`` surveys with (viz records nothing: a
+    recording is no subject of these cases)."""
+    extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
+    return Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True)
+
+
+def reach(d: Deployment, phase: str) -> None:
+    """Wait until the survey is ``driving`` to scan 2 or ``scanning`` it."""
+    if phase == "driving":
+        wait_driving(d, 2)
+    else:
+        d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
+
+
 # --- the cases ---
 def kill_case(service: str, phase: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
-        extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
-        d = Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True)
+        d = survey_deployment(procs, tmp, service)
         try:
             truth = Truth(d)
             s = d.start()
-            if phase == "driving":
-                wait_driving(d, 2)
-            else:
-                d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
+            reach(d, phase)
             os.kill(pid_of(d, service), signal.SIGKILL)
             finish(d, s.mission)
             ok, text, figs = survey_verdict(d, s.mission, truth)

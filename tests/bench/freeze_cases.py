@@ -24,18 +24,17 @@ from pathlib import Path
 
 from common import keys
 from common.config import Manifest
-from common.messages.mission import MissionEvent, MissionPhase
+from common.messages.mission import MissionEvent
 from tests.bench.fault_cases import (
-    FIELD_HZ,
     Case,
     Truth,
     finish,
     pid_of,
+    reach,
+    survey_deployment,
     survey_verdict,
-    wait_driving,
 )
 from tests.conftest import Procs, Record, record
-from tests.integration.test_mission import Deployment
 
 HUNG_AFTER_S = Manifest(machine="x").hung_after_s  # the shipped default, wall time
 SCANNER_DEADLINE_S = 15.0  # sim time: the bound for the scanner mid-scan
@@ -56,16 +55,12 @@ def noticed_after(log: Path, service: str, pid: int, since: float, timeout: floa
 
 def freeze_case(service: str, phase: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
-        extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
-        d = Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True)
+        d = survey_deployment(procs, tmp, service)
         try:
             truth = Truth(d)
             events: Record[MissionEvent] = record(d.bus, keys.MISSION_EVENT)
             s = d.start()
-            if phase == "driving":
-                wait_driving(d, 2)
-            else:
-                d.wait(lambda x: x.phase == MissionPhase.SCANNING and x.current_scan == 2)
+            reach(d, phase)
             pid = pid_of(d, service)
             frozen_ns = truth.samples[-1].stamp_ns if truth.samples else 0
             t0 = time.monotonic()

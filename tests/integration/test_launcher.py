@@ -35,6 +35,16 @@ backend = "sim"
     return m
 
 
+def replaced(session: zenoh.Session, service: str, pid: int, timeout: float = 30) -> int:
+    """The pid of the process alive as ``service`` in place of ``pid``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        assert time.monotonic() < deadline, f"{service} (pid {pid}) was not replaced"
+        for a in wait_alive(session, {service}, timeout=2).seen:
+            if a.service == service and a.pid != pid:
+                return a.pid
+
+
 def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: Path) -> None:
     port = free_port()
     manifest = write_manifest(tmp_path, port)
@@ -48,13 +58,7 @@ def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: 
         gnss_pid = next(a.pid for a in seen if a.service == "gnss")
         all_pids = {a.pid for a in seen}
         os.kill(gnss_pid, signal.SIGKILL)
-        deadline = time.monotonic() + 30
-        new_pid = None
-        while new_pid is None:
-            assert time.monotonic() < deadline, "killed service was not restarted"
-            for a in wait_alive(session, {"gnss"}, timeout=2).seen:
-                if a.service == "gnss" and a.pid != gnss_pid:
-                    new_pid = a.pid
+        new_pid = replaced(session, "gnss", gnss_pid)
         all_pids.add(new_pid)
         status = subprocess.run(
             [sys.executable, "-m", "phenorover", "status", "--connect", f"tcp/127.0.0.1:{port}"],
@@ -233,13 +237,7 @@ def test_up_kills_and_restarts_a_hung_service(procs: Procs, tmp_path: Path) -> N
         assert beat.wait(10), "no heartbeat from gnss"
         sub.undeclare()
         os.kill(hung, signal.SIGSTOP)
-        deadline = time.monotonic() + 30
-        new_pid = None
-        while new_pid is None:
-            assert time.monotonic() < deadline, "the hung service was not replaced"
-            for a in wait_alive(session, {"gnss"}, timeout=2).seen:
-                if a.service == "gnss" and a.pid != hung:
-                    new_pid = a.pid
+        replaced(session, "gnss", hung)
         assert not pid_alive(hung), "the hung process was left behind"
         assert f"service gnss (pid {hung}) has not been heard for" in log.read_text()
     finally:
