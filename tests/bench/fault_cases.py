@@ -117,11 +117,11 @@ def wait_driving(d: Deployment, scan: int) -> None:
     assert got is not None, "never drove toward the location"
 
 
-def survey_deployment(procs: Procs, tmp: Path, service: str) -> Deployment:
+def survey_deployment(procs: Procs, tmp: Path, service: str, top: str = "") -> Deployment:
     """The deployment a case of ``service`` surveys with (viz records nothing: a
-    recording is no subject of these cases)."""
+    recording is no subject of these cases); ``top``: top-level manifest keys."""
     extra = "[services.viz]\nsave = ''\n" if service == "viz" else ""
-    return Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True)
+    return Deployment(procs, tmp, extra, hz=FIELD_HZ, home=True, top=top)
 
 
 def reach(d: Deployment, phase: str) -> None:
@@ -157,10 +157,15 @@ def kill_case(service: str, phase: str) -> Case:
 
 
 def stop_case(
-    service: str, sig: signal.Signals = signal.SIGKILL, limit: tuple[float, float] = (0.5, 0.2)
+    service: str,
+    sig: signal.Signals = signal.SIGKILL,
+    limit: tuple[float, float] = (0.5, 0.2),
+    software_s: float | None = None,
 ) -> Case:
     """The robot driving at cruise when ``service`` is killed (or frozen: SIGSTOP, and
-    SIGCONT once measured): it must stand within ``limit`` (s, m) by the truth."""
+    SIGCONT once measured): it must stand within ``limit`` (s, m) by the truth; with
+    ``software_s``, the time beyond the drivetrain's own stop from the speed met must
+    be within it instead (a bound set by a timer, not by braking)."""
     frozen = sig == signal.SIGSTOP
 
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
@@ -196,6 +201,8 @@ def stop_case(
                 f"(the drivetrain alone: {floor_s:.2f} s, {100 * floor_m:.1f} cm; "
                 f"the software's part: {dt - floor_s:.2f} s)"
             )
+            if software_s is not None:
+                return dt - floor_s <= software_s, text, figs
             return dt <= limit[0] and dist <= limit[1], text, figs
         finally:
             d.close()
@@ -204,7 +211,9 @@ def stop_case(
     return Case(
         f"stop-{service}-{'frozen' if frozen else 'killed'}",
         f"{sig.name} {service} while driving (real time, field timers)",
-        f"the robot (truth) stands within {limit[0]:g} s and {limit[1]:g} m",
+        f"the robot (truth) stands within {limit[0]:g} s and {limit[1]:g} m"
+        if software_s is None
+        else f"the robot (truth) stands within {software_s:g} s beyond the drivetrain's own stop",
         run,
     )
 
@@ -251,7 +260,7 @@ CASES: list[Case] = [
     # drives nothing itself, and the route navigation follows runs out with its lease (2 s)
     stop_case("nav", signal.SIGSTOP, (1.0, 0.2)),
     stop_case("base", signal.SIGSTOP, (1.0, 0.2)),
-    stop_case("mission", signal.SIGSTOP, (2.5, 1.0)),
+    stop_case("mission", signal.SIGSTOP, software_s=2.5),  # the lease, 2 s, and 0.5 s
     Case(
         "power-cut-mid-scan",
         "every service and the launcher SIGKILLed mid-scan, launcher started again",

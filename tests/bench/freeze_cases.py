@@ -4,12 +4,13 @@ bus says it is gone until what it last said grows old.
 
 Each service is frozen during a survey of the tiny field, while driving and while
 scanning, and sent SIGCONT once the launcher has replaced it. Judged: the launcher
-noticed the silent heartbeat within ``hung_after_s`` (wall time) and restarted the
-service; the survey completed with every location done once and its true pose within
-tolerance; and, for the scanner frozen mid-scan, the mission gave the attempt up
-within 15 s of sim time (``scanner_lost_s`` is 10 s). Where the robot must stand when
-the frozen service commands motion is timed by the real-time stop cases
-(``stop-<service>-frozen`` in :mod:`tests.bench.fault_cases`).
+noticed the silent heartbeat within ``hung_after_s`` (wall time; 5 s here, see
+:data:`HUNG_AFTER_S`) and restarted the service; the survey completed with every
+location done once and its true pose within tolerance; and, for the scanner frozen
+mid-scan, the mission gave the attempt up within 15 s of sim time (``scanner_lost_s``
+is 10 s). Where the robot must stand when the frozen service commands motion is timed
+by the real-time stop cases (``stop-<service>-frozen`` in
+:mod:`tests.bench.fault_cases`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ import time
 from pathlib import Path
 
 from common import keys
-from common.config import Manifest
 from common.messages.mission import MissionEvent
 from tests.bench.fault_cases import (
     Case,
@@ -36,7 +36,11 @@ from tests.bench.fault_cases import (
 )
 from tests.conftest import Procs, Record, record
 
-HUNG_AFTER_S = Manifest(machine="x").hung_after_s  # the shipped default, wall time
+# The launcher's limit here, wall time: at 20x the shipped 10 s is 200 s of sim time,
+# in which a mission that waits on a frozen nav gives its route up (route_time_s, 300 s
+# of sim time, is a field allowance in sim time); 5 s is 100 s of sim time. In the
+# field sim and wall time are one, and the shipped 10 s stands.
+HUNG_AFTER_S = 5.0
 SCANNER_DEADLINE_S = 15.0  # sim time: the issue's bound for the scanner mid-scan
 LOST = "scanner lost the scan"
 
@@ -55,7 +59,7 @@ def noticed_after(log: Path, service: str, pid: int, since: float, timeout: floa
 
 def freeze_case(service: str, phase: str) -> Case:
     def run(procs: Procs, tmp: Path) -> tuple[bool, str, dict[str, float]]:
-        d = survey_deployment(procs, tmp, service)
+        d = survey_deployment(procs, tmp, service, f"hung_after_s = {HUNG_AFTER_S}")
         try:
             truth = Truth(d)
             events: Record[MissionEvent] = record(d.bus, keys.MISSION_EVENT)

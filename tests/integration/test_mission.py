@@ -48,7 +48,8 @@ class Deployment:
     nav steers at, keeps seven processes at 20x within two cores (at the shipped 50 Hz
     nav falls behind its odometry), and the fault campaign asks for the shipped 50.
     ``home``: drive back to the Origin after the last scan, as shipped (the campaign);
-    the tests leave that leg to test_any_field's ``phenorover sim``."""
+    the tests leave that leg to test_any_field's ``phenorover sim``. ``top``: more
+    top-level manifest keys."""
 
     def __init__(
         self,
@@ -62,6 +63,7 @@ class Deployment:
         wrap: Sequence[str] = (),
         hz: float = TEST_HZ,
         home: bool = False,
+        top: str = "",
     ) -> None:
         self.tmp, self.port = tmp, free_port()
         self.runs = tmp / "runs"
@@ -73,6 +75,7 @@ class Deployment:
         # a route lease and navigation's silence during a scan: a second of wall time
         lease = f"lease_s = {1.0 * wall}\nnav_lost_s = {1.0 * wall}" if wall else ""
         manifest.write_text(f"""machine = "test"
+{top}
 clock = "sim"
 field = "{TINY}"
 run_dir = "{self.runs}"
