@@ -35,12 +35,13 @@ from common.messages.plan import PlanResult
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.config import MissionConfig
+from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob
 from services.mission.runfiles import write_run_files
 from services.mission.sources import requested_plan, unfinished
-from services.mission.survey import Aborted, Feeds, Survey
+from services.mission.survey import Survey
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0

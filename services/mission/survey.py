@@ -27,17 +27,16 @@ from common.messages.nav import (
     LEASE_ENDED,
     CancelRoute,
     FollowRoute,
-    NavProgress,
     NavReply,
     NavState,
     PoseEstimate,
     RenewRoute,
 )
-from common.messages.scan import ScannerStatus
 from common.missionlog import Step
 from common.service import Context
-from common.transport import Bus, Latest, RpcError, RpcTimeout
+from common.transport import RpcError, RpcTimeout
 from services.mission.config import MissionConfig
+from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
 from services.mission.scanning import Scans
@@ -45,23 +44,6 @@ from services.mission.scanning import Scans
 Q = TypeVar("Q")
 R = TypeVar("R")
 SKEW_NS = NS // 5
-
-
-class Aborted(Exception):
-    """The operator aborted, or the service is stopping."""
-
-
-class Feeds:
-    """What a survey reads from the bus, subscribed once per service (a subscriber per
-    survey would add four threads for every mission the service ever runs): the newest
-    pose, route progress and scanner status, and each pose handed to ``on_pose``."""
-
-    def __init__(self, bus: Bus) -> None:
-        self.pose: Latest[PoseEstimate] = bus.latest(keys.NAV_POSE)
-        self.progress: Latest[NavProgress] = bus.latest(keys.NAV_PROGRESS)
-        self.scanner: Latest[ScannerStatus] = bus.latest(keys.SCANNER_STATUS)
-        self.on_pose: Callable[[PoseEstimate], None] = lambda _p: None
-        bus.subscribe(keys.NAV_POSE, lambda p: self.on_pose(p))
 
 
 class Survey:

@@ -34,8 +34,9 @@ from common.missionlog import Step
 from common.service import Context
 from common.transport import Bus
 from services.mission.config import MissionConfig
+from services.mission.feeds import Feeds
 from services.mission.log import MissionLog
-from services.mission.survey import Feeds, Survey
+from services.mission.survey import Survey
 from tests.conftest import client
 
 NS = 1_000_000_000
