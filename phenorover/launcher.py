@@ -16,6 +16,7 @@ service restarted in a loop. With ``[zenoh.access]`` the router enforces access 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import os
@@ -226,7 +227,8 @@ class Launcher:
             silent,
         )
         proc.kill()  # SIGKILL ends a stopped process too; its exit restarts it below
-        proc.wait()
+        with contextlib.suppress(subprocess.TimeoutExpired):  # else reaped next round
+            proc.wait(timeout=self.grace_s)
 
     def pids(self) -> dict[str, int]:
         return {n: c.proc.pid for n, c in self.children.items() if c.proc is not None}

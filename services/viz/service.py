@@ -10,11 +10,9 @@ and the cells' view counts are computed on a low-priority worker thread.
 
 from __future__ import annotations
 
-import argparse
 import collections
 import contextlib
 import functools
-import json
 import logging
 import os
 import queue
@@ -57,26 +55,6 @@ LATEST: dict[str, Topic[Any]] = {
 }
 
 
-class VizCli:
-    """``--serve``, ``--save FILE.rrd`` and ``--connect URL``: a ``--connect`` value
-    with a rerun scheme (``rerun+http://...``) is the viewer to push into, any other
-    stays a Zenoh endpoint."""
-
-    def add(self, parser: argparse.ArgumentParser) -> None:
-        parser.add_argument("--serve", action="store_true", help="serve gRPC + web viewer")
-        parser.add_argument("--save", metavar="FILE.rrd", help="write the recording to FILE")
-
-    def overrides(self, args: argparse.Namespace) -> list[str]:
-        out = ["serve=true"] if args.serve else []
-        if args.save:
-            out.append(f"save={json.dumps(args.save)}")
-        viewers = [c for c in args.connect if c.startswith("rerun")]
-        args.connect = [c for c in args.connect if not c.startswith("rerun")]
-        if viewers:
-            out.append(f"connect={json.dumps(viewers[-1])}")
-        return out
-
-
 class VizService:
     def __init__(self, ctx: Context, cfg: VizConfig) -> None:
         self.ctx, self.cfg, self.log = ctx, cfg, ctx.log
@@ -102,6 +80,9 @@ class VizService:
         for name, topic in LATEST.items():
             ctx.bus.subscribe(topic, functools.partial(self._put, name))
         ctx.bus.subscribe(keys.MISSION_EVENT, self._on_event)
+        # the servers listen before the service is alive (after build()), so a client
+        # that sees it alive can connect; run() closes them
+        self.out.start()
 
     # --- bus callbacks (Zenoh threads: store and return) ---
     def _put(self, name: str, msg: Any) -> None:
@@ -135,7 +116,6 @@ class VizService:
         worker = threading.Thread(target=self._work, daemon=True, name="viz-worker")
         worker.start()
         try:
-            self.out.start()
             for rec in self.out.streams():
                 # a copy: the worker thread adds the field's cells meanwhile
                 self.out.log_static(rec, list(self.static.values()))

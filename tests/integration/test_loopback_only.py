@@ -18,6 +18,7 @@ import dataclasses
 import ipaddress
 import os
 import re
+import select
 import signal
 import struct
 import time
@@ -34,7 +35,7 @@ from common.client import wait_alive
 from common.config import load_manifest, zenoh_config
 from services import SERVICES
 from services.viz.config import VizConfig
-from tests.conftest import REPO, Procs, free_port, pid_alive
+from tests.conftest import REPO, Procs, free_port
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
 ENDPOINT = re.compile(r"((?:tcp|udp|tls|quic)/.+):(\d+)")
@@ -191,17 +192,23 @@ def private_copy(shipped: Path, tmp: Path) -> tuple[Path, set[int]]:
     return path, set(ports.values())
 
 
-def wait_listening(root: int, ports: set[int], timeout: float) -> list[Sock]:
-    """The tree's sockets once every port of ``ports`` is listening (TCP) or bound (UDP)
-    in it, or at ``timeout``. Servers start after their service is alive (the
-    dashboard's web viewer is a process of its own)."""
+def wait_exit(pids: list[int], timeout: float) -> list[int]:
+    """Those of ``pids`` still running after ``timeout`` s, waited for on their pidfds
+    (they are not this process's children)."""
     deadline = time.monotonic() + timeout
-    while True:
-        socks = sockets(root)
-        up = {s.port for s in socks if s.state in ("LISTEN", "")}
-        if ports <= up or time.monotonic() > deadline:
-            return socks
-        time.sleep(0.2)
+    left = []
+    for pid in pids:
+        try:
+            fd = os.pidfd_open(pid)
+        except ProcessLookupError:
+            continue  # gone already
+        try:
+            ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+            if not ready:
+                left.append(pid)
+        finally:
+            os.close(fd)
+    return left
 
 
 @pytest.mark.parametrize("deployment", ["sim", "hil"])
@@ -221,7 +228,9 @@ def test_simulated_deployment_opens_sockets_on_loopback_only(
         finally:
             session.close()
         assert alive, f"not alive: {sorted(alive.missing)}; see {log}"
-        socks = wait_listening(up.pid, ports, timeout=30)
+        # alive means serving: every listener is up by now (viz starts its servers
+        # before it declares itself alive)
+        socks = sockets(up.pid)
         tree = process_tree(up.pid)
         listening = {s.port for s in socks if s.state in ("LISTEN", "")}
         assert ports <= listening, f"configured ports not listening: {ports - listening}"
@@ -231,9 +240,5 @@ def test_simulated_deployment_opens_sockets_on_loopback_only(
         up.send_signal(signal.SIGTERM)
         code = up.wait(timeout=20)
     assert code == 0, f"phenorover up exited {code}; see {log}"
-    deadline = time.monotonic() + 10
-    while (left := [f"{w} ({p})" for p, w in tree.items() if pid_alive(p)]) and (
-        time.monotonic() < deadline
-    ):
-        time.sleep(0.1)
+    left = [f"{tree[p]} ({p})" for p in wait_exit(list(tree), timeout=10)]
     assert not left, f"outlived the launcher: {left}"

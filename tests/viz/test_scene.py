@@ -24,9 +24,9 @@ from common.robot import LidarMount, ScannerMount, default_robot
 from services.planner.core import plan as make_plan
 from services.sim.render import write_e57
 from services.viz import clouds, scene
+from services.viz.cli import VizCli
 from services.viz.config import VizConfig
 from services.viz.outputs import save_path
-from services.viz.service import VizCli
 from tests.conftest import REPO
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
