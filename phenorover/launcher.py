@@ -11,7 +11,8 @@ whatever is left after ``grace_s``.
 Everything is checked before anything starts (:mod:`phenorover.preflight`):
 a manifest that names a missing field or mistyped key is one error line, never a
 service restarted in a loop. With ``[zenoh.access]`` the router enforces access control
-(:mod:`common.acl`) and the denials it logs come out as ``phenorover.acl`` warnings.
+(:mod:`common.acl`) and the denials it logs (:mod:`common.acl_log`) come out as
+``phenorover.acl`` warnings.
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from typing import IO, Any
 import zenoh
 
 from common import keys
-from common.acl import LOG_TARGET, DenialLog, router_acl
+from common.acl import router_acl
+from common.acl_log import LOG_TARGET, DenialLog
 from common.config import ConfigError, Manifest, decode_section, zenoh_config
 from common.process import die_with_parent
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools

@@ -14,15 +14,8 @@ import pytest
 import zenoh
 
 from common import keys
-from common.acl import (
-    ROLES,
-    SIMULATION_ONLY,
-    DenialLog,
-    key_expr,
-    may_send,
-    parse_denial,
-    router_acl,
-)
+from common.acl import ROLES, SIMULATION_ONLY, key_expr, may_send, router_acl
+from common.acl_log import DenialLog, parse_denial
 from common.certs import issue_files
 from common.config import AccessConfig, TlsConfig, zenoh_config
 from common.messages.mission import MissionEvent
