@@ -17,15 +17,11 @@ from common.messages.base import Imu, LaserScan, Odometry, Twist
 from common.messages.gnss import GnssHeading, NavSatFix
 from common.messages.nav import (
     LEASE_ENDED,
-    CancelRoute,
-    FollowRoute,
-    Leg,
     NavCommand,
     NavProgress,
     NavReply,
     NavState,
     PoseEstimate,
-    RenewRoute,
 )
 from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
@@ -36,6 +32,7 @@ from services.nav.fine import pose_sds
 from services.nav.follower import Follower
 from services.nav.gyro import Gyro
 from services.nav.obstacles import ObstacleWatch, hits_ahead, hits_on_leg
+from services.nav.routes import Routes
 from services.nav.tilt import Tilt, tilt_of
 
 
@@ -45,8 +42,6 @@ class NavService:
         check_limits(cfg, ctx.robot)
         self.mounts = Mounts.of(ctx.robot)
         self.frame, fld = load_georeferenced(ctx.field, ctx.clock)
-        grow = cfg.route_margin_m
-        self.route_box = fld.bounds + np.array([-grow, -grow, grow, grow])
         g = cfg.obstacle_crop_margin_m
         self.crop = fld.plot_boxes[:, [0, 1, 3, 4]] + np.array([-g, -g, g, g])
         self.loc = Localizer(cfg.ekf)
@@ -60,6 +55,7 @@ class NavService:
         self._odom_at = 0.0  # when the last odometry arrived (s)
         self._scan: tuple[int, float] | None = None  # (scan id, when its scan was seen)
         self._lock = threading.Lock()
+        self.routes = Routes(self.follower, self._lock, fld.bounds, cfg.route_margin_m, ctx)
         self.obstacles = ObstacleWatch(cfg.obstacle_min_points, cfg.obstacle_scans)
         self._moving_until = 0.0  # time of the last non-zero velocity command (s)
         self._last_fix = -math.inf  # time of the last fused fix (s)
@@ -204,48 +200,7 @@ class NavService:
             (self.ctx.log.warning if held else self.ctx.log.info)("%s%s", said, at if held else "")
 
     def handle(self, cmd: NavCommand) -> NavReply:
-        now = self.ctx.clock.now_ns()
-        t = now / 1e9
-        with self._lock:
-            match cmd:
-                case FollowRoute(route_id=rid, legs=legs, max_speed=vmax, lease_s=lease):
-                    if why := self._off_field(legs):
-                        self.ctx.log.warning("route %s refused: %s", rid, why)
-                        return NavReply(stamp_ns=now, accepted=False, reason=why)
-                    self.follower.start(rid, legs, vmax, lease_until=t + lease, join=cmd.join)
-                    self.ctx.log.info(
-                        "route %s: %d legs, from leg %d", rid, len(legs), self.follower.leg
-                    )
-                case RenewRoute(route_id=rid, lease_s=lease):
-                    if not self.follower.renew(rid, t + lease):
-                        return self._not_followed(rid, now)
-                case CancelRoute(route_id=rid):
-                    # a cancel names its route: one that arrives late (it waited behind
-                    # a stalled tick) must not end the route sent after it
-                    if rid and rid != self.follower.route_id:
-                        return self._not_followed(rid, now)
-                    self.follower.cancel()
-                    self.ctx.log.info("route %s cancelled", self.follower.route_id)
-        return NavReply(stamp_ns=now, accepted=True)
-
-    def _not_followed(self, rid: str, now: int) -> NavReply:
-        """The refusal of a command naming a route other than the one followed."""
-        f = self.follower
-        why = f"route {rid} is not being followed (now: {f.route_id or 'none'}, {f.state})"
-        return NavReply(stamp_ns=now, accepted=False, reason=why)
-
-    def _off_field(self, legs: list[Leg]) -> str:
-        """Why the route is refused ("" if it is not): a leg ending more than
-        ``route_margin_m`` outside the field's boundary."""
-        x0, y0, x1, y1 = self.route_box
-        for k, lg in enumerate(legs):
-            for x, y in ((lg.x0, lg.y0), (lg.x1, lg.y1)):
-                if not (x0 <= x <= x1 and y0 <= y <= y1):
-                    return (
-                        f"leg {k} reaches ({x:.6g}, {y:.6g}) m, more than "
-                        f"{self.cfg.route_margin_m:g} m outside field {self.ctx.field}"
-                    )
-        return ""
+        return self.routes.handle(cmd, self.ctx.clock.now_ns())
 
     def _on_alive(self, token: str, alive: bool) -> None:
         """A mission that dies stops the robot at once rather than at its lease's end
