@@ -39,8 +39,7 @@ from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob
-from services.mission.runfiles import write_run_files
-from services.mission.sources import requested_plan, unfinished
+from services.mission.sources import new_mission, requested_plan, unfinished
 from services.mission.survey import Survey
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
@@ -178,23 +177,7 @@ class MissionService:
 
     def _start_planned(self, cmd: MissionStart) -> None:
         plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s)
-        try:
-            segs = segments(plan)
-        except ValueError as exc:
-            raise RequestError(str(exc)) from None
-        name = cmd.mission or f"{plan.field}-{time.strftime('%Y%m%d-%H%M%S')}"
-        path = self.ctx.run_dir / name / "mission.db"
-        if path.exists():
-            raise RequestError(f"MissionStart.mission: {name} exists already in {path.parent}")
-        log = MissionLog(path)
-        steps = []
-        for k, s in enumerate(x for x in segs if x.cand_id is not None):
-            x, y, yaw = s.end
-            steps.append((k + 1, int(s.cand_id or 0), x, y, yaw))
-        log.create(
-            name, plan.field, self.ctx.clock.now_ns(), msgspec.json.encode(plan).decode(), steps
-        )
-        write_run_files(path.parent, plan, self.ctx.robot, self.ctx.manifest, self.ctx.field)
+        name, log, segs = new_mission(self.ctx, plan, cmd.mission)
         self.plan = plan
         self._launch(name, log, segs)
 

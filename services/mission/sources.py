@@ -1,10 +1,12 @@
 """Where a mission comes from: the plan a ``MissionStart`` asks for (a plan file in
 the run folder, or the planner's), or a mission a stopped service left unfinished in
-the run folder. Every refusal is one line naming what is wrong."""
+the run folder, and the folder and log of a new one. Every refusal is one line naming
+what is wrong."""
 
 from __future__ import annotations
 
 import sqlite3
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +22,8 @@ from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.log import MissionLog
+from services.mission.plan import Segment, segments
+from services.mission.runfiles import write_run_files
 
 
 def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResult:
@@ -51,6 +55,31 @@ def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResul
         )
     except RpcError as exc:
         raise RequestError(f"planner: {exc}") from None
+
+
+def new_mission(
+    ctx: Context, plan: PlanResult, name: str = ""
+) -> tuple[str, MissionLog, list[Segment]]:
+    """A new mission of ``plan`` (named ``name``, else after the field and the time):
+    its log in ``<run_dir>/<name>/mission.db`` with a step per scan location in tour
+    order, the run's files beside it, and the plan's segments. RequestError when the
+    plan cannot be driven or the mission exists already."""
+    try:
+        segs = segments(plan)
+    except ValueError as exc:
+        raise RequestError(str(exc)) from None
+    name = name or f"{plan.field}-{time.strftime('%Y%m%d-%H%M%S')}"
+    path = ctx.run_dir / name / "mission.db"
+    if path.exists():
+        raise RequestError(f"MissionStart.mission: {name} exists already in {path.parent}")
+    log = MissionLog(path)
+    steps = []
+    for k, s in enumerate(x for x in segs if x.cand_id is not None):
+        x, y, yaw = s.end
+        steps.append((k + 1, int(s.cand_id or 0), x, y, yaw))
+    log.create(name, plan.field, ctx.clock.now_ns(), msgspec.json.encode(plan).decode(), steps)
+    write_run_files(path.parent, plan, ctx.robot, ctx.manifest, ctx.field)
+    return name, log, segs
 
 
 @dataclass
