@@ -23,6 +23,8 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common import fieldbook
+
 # the types live in common.field_model; the field's users take them from here
 from common.field_model import (
     FIELDS_DIR,
@@ -222,18 +224,9 @@ def build_field(layout: FieldLayout) -> Field:
     row, col = np.divmod(np.arange(layout.rows * layout.plots_per_row), layout.plots_per_row)
     x0 = layout.headland_width + col * px
     y0 = edge + row * py
-    zeros = np.zeros_like(x0, dtype=np.float64)
-    boxes = np.stack(
-        [
-            x0,
-            y0,
-            zeros,
-            x0 + layout.plot_length,
-            y0 + layout.plot_width,
-            zeros + layout.plot_height,
-        ],
-        axis=1,
-    ).astype(np.float64)
+    lo = np.stack([x0, y0, np.zeros_like(x0)], axis=1).astype(np.float64)
+    size = np.array([layout.plot_length, layout.plot_width, layout.plot_height])
+    boxes = np.hstack([lo, lo + size])
     bounds = np.array(
         [
             0.0,
@@ -268,6 +261,8 @@ def field_path(source: str | Path) -> Path:
 def load_field(source: str | Path) -> tuple[FieldLayout, Field]:
     """Read a field from a TOML layout, a GeoJSON FeatureCollection of plot polygons
     (see :mod:`common.field_geojson`), or a shipped example name (``engr``, ``spl``).
+    A TOML's CSV ``field_book`` is read from beside it; a book must match the plots
+    (:mod:`common.fieldbook`).
 
     Raises FieldError with one line naming the file and the problem.
     """
@@ -293,7 +288,11 @@ def load_field(source: str | Path) -> tuple[FieldLayout, Field]:
         layout = msgspec.toml.decode(data, type=FieldLayout)
     except msgspec.DecodeError as exc:
         raise FieldError(f"{path}: {' '.join(str(exc).split())}") from None
+    book = fieldbook.label(layout, path.parent)  # before resolve reads a CSV book
+    layout = fieldbook.resolve(layout, path.parent, str(path))
     try:
-        return layout, build_field(layout)
+        fld = build_field(layout)
     except FieldError as exc:
         raise FieldError(f"{path}: {exc}") from None
+    fieldbook.check(layout, fld, str(path), book)
+    return layout, fld

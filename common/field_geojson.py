@@ -1,10 +1,11 @@
 """Fields from GeoJSON plot polygons, and WGS84 <-> ``field`` frame conversion.
 
 A plot file is a FeatureCollection of Polygon features in WGS84 (lon, lat), one per plot,
-optionally with a ``height`` property (metres). A foreign member ``"phenorover"`` holds
-settings (:class:`GeoSettings`); without ``row_bearing_deg`` the bearing is taken from
-the longest edge of the first polygon. Polygons must be axis-aligned rectangles once
-rotated by the row bearing.
+optionally with a ``height`` property (metres) and field-book properties (``plot``,
+``entry``, ``rep`` and their aliases: :func:`common.fieldbook.from_properties`). A foreign
+member ``"phenorover"`` holds settings (:class:`GeoSettings`); without ``row_bearing_deg``
+the bearing is taken from the longest edge of the first polygon. Polygons must be
+axis-aligned rectangles once rotated by the row bearing.
 
 Where a field is on the globe (:func:`placed`): a field that gives its origin is there.
 A field that gives none is refused by a real deployment (GNSS would place the robot in
@@ -15,6 +16,7 @@ service of a deployment applies when it loads the field frame, so all agree.
 
 from __future__ import annotations
 
+import datetime
 import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -23,6 +25,7 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common import fieldbook
 from common.clock import SimClock
 from common.field import assemble, field_path, load_field
 from common.field_model import (
@@ -57,6 +60,7 @@ class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     robot_half_width: NonNeg = 0.335
     origin_alt: Altitude = 0.0
     start_corner: Corner = "bottom-right"
+    planting_date: datetime.date | None = None
 
 
 class _Polygon(msgspec.Struct, frozen=True):
@@ -221,6 +225,7 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
     nrows, ncols = int(row.max()) + 1, int(col.max()) + 1
     if len(set(zip(row.tolist(), col.tolist(), strict=True))) != len(boxes):
         raise FieldError(f"{source}: two plots share a row and column (overlapping plots?)")
+    book = fieldbook.from_properties([f.properties for f in fc.features], row, col, source)
 
     shift = np.array([boxes[:, 0].min() - s.headland_width, boxes[:, 1].min() - s.edge_width])
     boxes[:, [0, 3]] -= shift[0]
@@ -260,10 +265,13 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
             origin_alt=s.origin_alt,
             row_bearing_deg=float(bearing),
             start_corner=s.start_corner,
+            field_book=book,
+            planting_date=s.planting_date,
         )
         # the constructor does not validate; a round trip through msgspec does
         layout = msgspec.convert(msgspec.to_builtins(layout), FieldLayout)
         field = assemble(layout, boxes, row, col, bounds)
     except (msgspec.ValidationError, FieldError) as exc:
         raise FieldError(f"{source}: {' '.join(str(exc).split())}") from None
+    fieldbook.check(layout, field, source)  # plot ids unique (positions are by geometry)
     return layout, field

@@ -5,6 +5,7 @@ by :func:`common.field.build_field`). Frames and numbering: :mod:`common.field`.
 from __future__ import annotations
 
 import dataclasses
+import datetime
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -46,6 +47,26 @@ class FieldError(ValueError):
     """A field description is wrong; the message is one line naming the source and problem."""
 
 
+# a plot id or entry name as breeders write them (Breedbase plot names run to ~40 chars)
+PlotId = Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+EntryName = Annotated[str, msgspec.Meta(max_length=256)]
+BookPath = Annotated[str, msgspec.Meta(min_length=1, max_length=4096)]
+
+
+class PlotRecord(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """One line of a field book (Breedbase convention): row 1 is the bottom row of plots
+    (field row index 0, smallest y), column 1 the leftmost plot of a row (smallest x)."""
+
+    plot: PlotId  # plot id / field-book number, unique in the field
+    row: PosInt
+    column: PosInt
+    entry: EntryName = ""  # entry / genotype / accession name ("" = none)
+    rep: Annotated[int, msgspec.Meta(ge=1, le=10_000)] | None = None  # replicate or block
+
+
+Book = Annotated[tuple[PlotRecord, ...], msgspec.Meta(max_length=MAX_PLOTS)]
+
+
 class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A regular plot-based breeding field, as a breeder describes it (metres, degrees).
 
@@ -61,6 +82,13 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     clockwise from north. ``start_corner`` is where tours start and end (the paper's
     Origin is the bottom-right corner). ``targets``: the registration spheres as the
     surveyor set them out, ``[x, y, pole_height]`` each (field frame, m).
+
+    ``field_book``: one :class:`PlotRecord` per plot (plot id, row, column, entry, rep),
+    in TOML an array of tables ``[[field_book]]``, or a string: the path of a CSV file
+    relative to the TOML file's folder, which :func:`common.field.load_field` replaces
+    by its records (see :mod:`common.fieldbook`); empty: no book. ``planting_date``:
+    the day the trial was sown (TOML local date ``2026-05-01``); the simulator grows
+    plants by days after planting.
     """
 
     name: str = "field"
@@ -85,6 +113,8 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
     start_corner: Corner = "bottom-right"
     targets: tuple[Site, ...] = ()
+    field_book: BookPath | Book = ()
+    planting_date: datetime.date | None = None
 
     @property
     def georeferenced(self) -> bool:

@@ -47,7 +47,13 @@ def resolve_field(
             f"PlanRequest: give exactly one of layout, geojson, name (got {given or 'none'})"
         )
     if req.layout is not None:
-        return req.layout, build_field(req.layout)
+        from common import fieldbook
+
+        field = build_field(req.layout)
+        # a layout sent whole must carry its book as records (no folder to read a CSV
+        # from here), and they must match its plots
+        fieldbook.check(req.layout, field, "PlanRequest.layout")
+        return req.layout, field
     if req.geojson:
         from common.field_geojson import field_from_geojson
 
