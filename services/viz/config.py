@@ -2,6 +2,8 @@ from typing import Annotated
 
 import msgspec
 
+from common.canopy import TRAITS
+
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 PosInt = Annotated[int, msgspec.Meta(gt=0)]
 
@@ -23,6 +25,8 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``scan_points``/``registered_points``: points kept per scan / of the registered
     cloud (random subsample). ``registered_files``: globs, in the mission's run folder,
     of the registered cloud (LAZ in the field frame or a multi-scan E57 with poses).
+    ``trait``: which of :data:`common.canopy.TRAITS` colours the plots once the
+    mission's ``traits_file`` (in its run folder, written after registration) exists.
     """
 
     serve: bool = False
@@ -40,6 +44,8 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
         default_factory=lambda: ["registered*.laz", "registered*.e57"]
     )
     trail_step_m: Annotated[float, msgspec.Meta(gt=0)] = 0.05
+    trait: str = "height"
+    traits_file: Annotated[str, msgspec.Meta(min_length=1)] = "traits.csv"
 
     def __post_init__(self) -> None:
         try:
@@ -50,3 +56,5 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
             ) from None
         if self.connect and not self.connect.startswith(("rerun://", "rerun+http")):
             raise ValueError(f"connect={self.connect!r}: expected rerun+http://HOST:PORT/proxy")
+        if self.trait not in TRAITS:
+            raise ValueError(f"trait={self.trait!r}: expected one of {', '.join(TRAITS)}")

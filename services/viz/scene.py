@@ -12,7 +12,7 @@ z up):
 - ``gnss/fix1``, ``gnss/fix2``, ``gnss/heading``
 - ``errors/cross_track_m``, ``errors/heading_deg``; ``mission/log``,
   ``mission/scans_done``; ``scanner/log``, ``scanner/progress``
-- ``clouds/scan_<id>``, ``clouds/registered``
+- ``clouds/scan_<id>``, ``clouds/registered``; ``field/traits/<trait>`` (:mod:`.traits_view`)
 """
 
 from __future__ import annotations
@@ -69,11 +69,11 @@ def blueprint() -> Any:
     progress and the mission log."""
     import rerun.blueprint as rrb
 
-    scene3d = rrb.Spatial3DView(
-        origin="/",
-        contents=["/field/**", "/route/**", "/robot/**", "/gnss/**", "/clouds/**"],
-        name="field",
-    )
+    # the traits' boxes get a tab of their own: the survey's cells and clouds hide them
+    survey = ["/field/**", "- /field/traits/**", "/route/**", "/robot/**", "/gnss/**", "/clouds/**"]
+    scene3d = rrb.Spatial3DView(origin="/", contents=survey, name="field")
+    mine = ["/field/traits/**", "/field/plots"]
+    traits = rrb.Spatial3DView(origin="/", contents=mine, name="traits")
     side = rrb.Vertical(
         rrb.TimeSeriesView(origin="/errors", name="cross-track (m), heading error (deg)"),
         rrb.TimeSeriesView(
@@ -82,7 +82,7 @@ def blueprint() -> Any:
         rrb.TextLogView(contents=["/mission/log", "/scanner/log"], name="mission log"),
     )
     return rrb.Blueprint(
-        rrb.Horizontal(scene3d, side, column_shares=[3, 2]),
+        rrb.Horizontal(rrb.Tabs(scene3d, traits), side, column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
         rrb.TimePanel(state="collapsed"),

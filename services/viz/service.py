@@ -33,7 +33,7 @@ from common.messages.nav import NavProgress, PoseEstimate
 from common.messages.plan import PlanResult
 from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
-from services.viz import clouds, scene
+from services.viz import clouds, scene, traits_view
 from services.viz.config import VizConfig
 from services.viz.outputs import Outputs
 
@@ -68,6 +68,7 @@ class VizService:
         self._last_pose: PoseEstimate | None = None
         self._last_progress: NavProgress | None = None
         self.registered_done = ""
+        self.traits = traits_view.TraitsWatch(cfg, self.out.log, self._submit, self.log)
         self.failed: set[str] = set()
         self._lock = threading.Lock()
         self._new: dict[str, Any] = {}
@@ -149,6 +150,7 @@ class VizService:
         for st in done:
             self._guarded("scan", functools.partial(self._queue_scan, st))
         self._guarded("registered", self._check_registered)
+        self._guarded("traits", lambda: self.traits.poll(self.ctx.run_dir, self.state))
 
     def _log_event(self, e: MissionEvent) -> None:
         self.out.log(e.stamp_ns, [scene.event_entry(e)])
@@ -213,6 +215,8 @@ class VizService:
         with contextlib.suppress(FieldError):
             candidates.append(load_field(plan.field)[1])
         field = scene.field_of(plan, candidates)
+        if plan is self.plan:
+            self.traits.field = field  # the traits' plots are this plan's
         if field is None or plan.cell_views is None:
             self.log.info("viz: plan %s: field cells not known here, plots only", plan.field)
             return

@@ -8,17 +8,23 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
+
 from common import keys
 from common.clock import WallClock
+from common.field import FieldLayout
 from common.messages.base import LaserScan
 from common.messages.core import Array
+from common.messages.mission import MissionPhase, MissionState
 from common.messages.nav import PoseEstimate
 from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
 from common.transport import Bus
+from services.planner.core import plan as make_plan
 from services.viz.config import VizConfig
 from services.viz.service import VizService
 from tests.viz import rrd
+from tests.viz.test_traits_view import THREE, TINY, write
 
 
 def wait_until(pred: object, timeout: float) -> bool:
@@ -91,3 +97,24 @@ def test_a_finished_scan_is_drawn_where_it_was_taken_not_where_the_robot_is(
     svc.tick()
     assert "scan" not in svc.failed and svc._jobs.qsize() == 1
     assert 2 not in svc._scan_poses
+
+
+def test_a_done_missions_traits_are_drawn_on_the_plans_plots(
+    client_bus: Bus, tmp_path: Path
+) -> None:
+    plan = make_plan(msgspec.toml.decode(TINY.read_bytes(), type=FieldLayout))
+    out = tmp_path / "live.rrd"
+    ctx = Context("viz", "test", client_bus, WallClock(), logging.getLogger("viz"), tmp_path)
+    svc = VizService(ctx, VizConfig(save=str(out)))
+    write(tmp_path / "m1" / "traits.csv", THREE)
+    svc._put("plan", plan)
+    svc._put("state", MissionState(stamp_ns=1, mission="m1", phase=MissionPhase.DONE))
+    for _ in range(2):  # the plan's field is found on the worker, then the traits drawn
+        svc.tick()
+        while not svc._jobs.empty():
+            job = svc._jobs.get_nowait()
+            assert job is not None
+            job()
+    svc.out.close()
+    assert not svc.failed
+    assert "/field/traits/height" in rrd.entity_paths(out)
