@@ -156,6 +156,7 @@ LAZY = {
     "nav-test": ("phenorover.eval.navtest", "run one of the paper's navigation experiments"),
     "mission": ("services.mission.cli", "control the mission service"),
     "register": ("services.register.cli", "register a mission's scans and write its report"),
+    "traits": ("services.traits.cli", "per-plot canopy traits of a registered survey"),
     "eval": ("phenorover.eval.cli", "score a simulated run against the simulator's truth"),
 }
 

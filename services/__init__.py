@@ -39,4 +39,5 @@ def module_of(name: str) -> str:
 # validates their sections and never starts them.
 JOBS: dict[str, str] = {
     "register": "services.register.config:RegisterRunConfig",
+    "traits": "services.traits.config:TraitsConfig",
 }

@@ -57,6 +57,11 @@ FINAL_PHASES = (MissionPhase.DONE, MissionPhase.ABORTED, MissionPhase.FAILED)
 # MissionState.detail of a survey that is done while its scans are being registered
 # (a child process of the mission service); another detail once registration ends
 REGISTERING = "registering"
+# the detail while the registered cloud's per-plot traits are computed (the next child
+# process, once registration succeeded and the mission asks for traits)
+COMPUTING_TRAITS = "computing traits"
+# the details of a mission whose outputs are still being made after the survey
+POST_PROCESSING = (REGISTERING, COMPUTING_TRAITS)
 
 
 class MissionState(Message, frozen=True, kw_only=True):

@@ -36,6 +36,9 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     folder when the service starts. ``register_on_done``: register the scans (``python
     -m services.register RUN_DIR --manifest M``, a child process at low priority, with
     the manifest's ``[services.register]`` options) once the mission is done.
+    ``traits_on_done``: then, when registration succeeded, compute the per-plot traits
+    (``python -m services.traits RUN_DIR --manifest M``, the same way, with the
+    manifest's ``[services.traits]`` options; see docs/traits.md).
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)
@@ -60,3 +63,4 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     return_to_origin: bool = True
     resume: bool = True
     register_on_done: bool = True
+    traits_on_done: bool = True

@@ -320,7 +320,7 @@ class MissionService:
                 self.detail = text
             self.event(level, text, log, mission)
 
-        job = RegistrationJob(run_dir, done, self.ctx.manifest)
+        job = RegistrationJob(run_dir, done, self.ctx.manifest, self.cfg.traits_on_done)
         try:
             job.start()
         except OSError as exc:

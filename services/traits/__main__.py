@@ -1,0 +1,5 @@
+import sys
+
+from services.traits.cli import main
+
+sys.exit(main())

@@ -1,0 +1,111 @@
+"""``phenorover traits RUN_DIR...`` (also ``python -m services.traits RUN_DIR``).
+
+Reads a registered run folder (``mission.db`` read-only, its plan's field and field
+book, ``registered.laz`` from ``phenorover register``), finds the ground, computes
+every plot's traits and writes into ``RUN_DIR`` (or ``--out``) ``traits.csv``,
+``traits_long.csv``, ``traits.geojson``, ``fieldmap.png`` and ``traits.toml`` (the
+options it ran with: :mod:`.config`, the manifest's ``[services.traits]``,
+``--config``, ``--set`` and the flags). See :mod:`.outputs` for the files and
+:mod:`.run` for where the survey date comes from (``--date`` overrides it).
+
+Several run folders: each run's outputs go into its own folder (into
+``--out/<run folder name>`` with ``--out``).
+
+Every file is written under a temporary name and renamed when complete, so an
+interrupted run leaves the previous outputs (or none), never half a file. Bad input
+is one error line on stderr and exit status 2, before anything of that run is
+written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+from pathlib import Path
+
+from services.traits.compute import NO_POINTS, OCCLUDED, OK, RunTraits, compute_run
+from services.traits.config import TraitsConfig, add_config_arguments, resolve
+from services.traits.outputs import write_outputs
+from services.traits.run import RunError
+
+log = logging.getLogger("phenorover.traits")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "run_dir", type=Path, nargs="+", help="a registered mission's folder: runs/<mission>"
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output folder (default: RUN_DIR; with several runs, OUT/<run folder name>)",
+    )
+    p.add_argument(
+        "--date",
+        default=None,
+        metavar="YYYY-MM-DD",
+        help="the survey's date (default: the mission's clock, else the simulated "
+        "trial's date in RUN_DIR/manifest.toml)",
+    )
+    add_config_arguments(p)
+
+
+def run_traits(
+    run_dir: Path, cfg: TraitsConfig, out: Path | None = None, date: str | None = None
+) -> tuple[RunTraits, list[str]]:
+    """Compute one run's traits and write its outputs into ``out`` (default:
+    ``run_dir``); returns them and the names of the files written. Raises RunError."""
+    rt = compute_run(run_dir, cfg, date)
+    t = time.perf_counter()
+    names = write_outputs(rt, cfg, out or run_dir)
+    rt.timings["write"] = time.perf_counter() - t
+    log.info("wrote %s (%.1f s)", ", ".join(names), rt.timings["write"])
+    return rt, names
+
+
+def _summary(rt: RunTraits, out: Path, seconds: float) -> str:
+    q = rt.table.quality
+    flags = ", ".join(f"{q.count(k)} {k}" for k in (OK, OCCLUDED, NO_POINTS) if q.count(k))
+    when = rt.date or "date unknown"
+    return (
+        f"traits of {rt.run_dir} ({when}): {len(q)} plots ({flags}) in {seconds:.1f} s: "
+        f"{out / 'traits.csv'}"
+    )
+
+
+def cmd_traits(args: argparse.Namespace) -> int:
+    runs: list[Path] = list(args.run_dir)
+    try:
+        cfg, _ = resolve(args)
+        for run in runs:
+            t0 = time.monotonic()
+            out = args.out if args.out is None or len(runs) == 1 else args.out / run.name
+            rt, _ = run_traits(run, cfg, out, args.date)
+            print(_summary(rt, out or run, time.monotonic() - t0), flush=True)
+    except (RunError, ValueError, OSError) as exc:
+        print(f"phenorover traits: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def add_command(p: argparse.ArgumentParser) -> None:
+    """``phenorover traits``."""
+    add_arguments(p)
+    p.set_defaults(func=cmd_traits)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from common.service import setup_logging
+
+    p = argparse.ArgumentParser(prog="python -m services.traits", description=__doc__)
+    add_arguments(p)
+    p.add_argument("--log-level", default="info")
+    args = p.parse_args(argv)
+    setup_logging(args.log_level)
+    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    return cmd_traits(args)

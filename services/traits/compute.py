@@ -1,0 +1,210 @@
+"""Per-plot traits of one registered survey: the ground (:mod:`.ground`), every
+point's height above it, the cloud cut by every plot footprint at once, and
+:func:`common.canopy.plot_traits` on each plot's points (the one definition of the
+traits, shared with the simulator's truth).
+
+A plot's quality: ``ok``; ``occluded`` when the share of its footprint cells holding
+a point (``seen``) is below ``min_seen``, so its traits describe only what the
+scanner saw; ``no points`` when the survey saw nothing of it (its traits are NaN).
+:func:`compute_run` is the one entry point for a run folder, reused by the
+multi-date (season) step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from common.canopy import TRAITS, CanopyDefinition, plot_traits
+from common.field import Field, FieldLayout
+from services.traits.config import TraitsConfig
+from services.traits.ground import GroundError, GroundModel, fit_ground
+from services.traits.run import Record, RunError, RunInput, load_run
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+log = logging.getLogger("phenorover.traits")
+
+OK, OCCLUDED, NO_POINTS = "ok", "occluded", "no points"
+NAMES: tuple[str, ...] = tuple(TRAITS)
+
+
+@dataclasses.dataclass(frozen=True)
+class TraitTable:
+    """The traits of every plot: ``values`` (P, len(NAMES)) in :data:`NAMES` order
+    (:data:`common.canopy.TRAITS`, NaN where undefined), ``quality`` per plot, the
+    field book ``records`` in plot order, the survey ``date`` ("" unknown) and the
+    ``definition`` they were computed with."""
+
+    records: list[Record]
+    values: F64
+    quality: list[str]
+    date: str
+    definition: CanopyDefinition
+
+    def column(self, trait: str) -> F64:
+        """One trait for every plot (P,)."""
+        return self.values[:, NAMES.index(trait)]
+
+
+@dataclasses.dataclass(frozen=True)
+class RunTraits:
+    """One run's traits and what they came from (:func:`compute_run`). ``timings``:
+    seconds per stage."""
+
+    run_dir: Path
+    mission: str
+    layout: FieldLayout
+    field: Field
+    records: list[Record]
+    table: TraitTable
+    ground: GroundModel
+    date: str
+    date_source: str
+    timings: dict[str, float]
+
+
+def _bands(lo: F64, hi: F64, band: I64) -> tuple[F64, F64, I64]:
+    """Per band (a row or a column of plots): its start, its end and its id, sorted by
+    start."""
+    ids, inv = np.unique(band, return_inverse=True)
+    start = np.full(len(ids), np.inf)
+    end = np.full(len(ids), -np.inf)
+    np.minimum.at(start, inv, lo)
+    np.maximum.at(end, inv, hi)
+    order = np.argsort(start)
+    return start[order], end[order], order
+
+
+def _band_of(v: F64, start: F64, end: F64) -> I64:
+    """Index (into the sorted bands) of the band holding each ``v``, -1 for none."""
+    k = np.searchsorted(start, v, side="right") - 1
+    inside = (k >= 0) & (v <= end[np.maximum(k, 0)])
+    return np.where(inside, k, -1)
+
+
+def plot_of(xy: F64, boxes: F64, row: I64, col: I64) -> I64:
+    """The plot holding each point (N,), -1 for none, from the plots' (P, 6) field
+    boxes and their row and column: a point's row of plots and column of plots are
+    found by binary search over the rows' and columns' extents, then the plot there
+    checked exactly (no loop over points or plots)."""
+    rs, re, rorder = _bands(boxes[:, 1], boxes[:, 4], row)
+    cs, ce, corder = _bands(boxes[:, 0], boxes[:, 3], col)
+    _, rinv = np.unique(row, return_inverse=True)
+    _, cinv = np.unique(col, return_inverse=True)
+    # (sorted row band, sorted column band) -> plot
+    rank_r = np.empty_like(rorder)
+    rank_r[rorder] = np.arange(len(rorder))
+    rank_c = np.empty_like(corder)
+    rank_c[corder] = np.arange(len(corder))
+    table = np.full((len(rs) + 1, len(cs) + 1), -1, dtype=np.int64)  # last: no band
+    table[rank_r[rinv], rank_c[cinv]] = np.arange(len(boxes))
+    p = table[_band_of(xy[:, 1], rs, re), _band_of(xy[:, 0], cs, ce)]
+    b = boxes[np.maximum(p, 0)]
+    inside = (
+        (p >= 0)
+        & (xy[:, 0] >= b[:, 0])
+        & (xy[:, 0] <= b[:, 3])
+        & (xy[:, 1] >= b[:, 1])
+        & (xy[:, 1] <= b[:, 4])
+    )
+    return np.where(inside, p, -1)
+
+
+def quality_of(traits: dict[str, float], min_seen: float) -> str:
+    if traits["points"] == 0:
+        return NO_POINTS
+    return OCCLUDED if traits["seen"] < min_seen else OK
+
+
+def trait_table(
+    xy: F64, h: F64, field: Field, records: list[Record], cfg: TraitsConfig, date: str
+) -> TraitTable:
+    """The :class:`TraitTable` of points ``xy`` (N, 2) at heights ``h`` above the
+    ground over ``field``'s plots."""
+    boxes = field.plot_boxes
+    p = plot_of(xy, boxes, field.plot_row, field.plot_col)
+    inside = np.flatnonzero(p >= 0)
+    order = inside[np.argsort(p[inside], kind="stable")]
+    ends = np.cumsum(np.bincount(p[inside], minlength=len(boxes)))
+    values = np.full((len(boxes), len(NAMES)), np.nan)
+    quality: list[str] = []
+    for k in range(len(boxes)):
+        idx = order[(ends[k - 1] if k else 0) : ends[k]]
+        foot = boxes[k, [0, 1, 3, 4]]
+        t = plot_traits(xy[idx], h[idx], foot, cfg.definition)
+        quality.append(quality_of(t, cfg.min_seen))
+        if quality[-1] == NO_POINTS:
+            t = {**t, "cover": float("nan"), "seen": 0.0}  # nothing seen: cover unknown
+        values[k] = [t[n] for n in NAMES]
+    return TraitTable(records, values, quality, date, cfg.definition)
+
+
+def compute_traits(inp: RunInput, cfg: TraitsConfig) -> RunTraits:
+    """The traits of a read run (:func:`.run.load_run`); raises RunError when no
+    ground is found."""
+    timings: dict[str, float] = {}
+    b = inp.field.bounds
+    m = cfg.ground.crop_margin
+    xyz = inp.cloud
+    t = time.perf_counter()
+    keep = (
+        (xyz[:, 0] >= b[0] - m)
+        & (xyz[:, 0] <= b[2] + m)
+        & (xyz[:, 1] >= b[1] - m)
+        & (xyz[:, 1] <= b[3] + m)
+    )
+    xyz = xyz[keep]
+    try:
+        ground = fit_ground(xyz, np.array([b[0] - m, b[1] - m, b[2] + m, b[3] + m]), cfg.ground)
+    except GroundError as exc:
+        raise RunError(f"{inp.run_dir / 'registered.laz'}: {exc}") from None
+    timings["ground"] = time.perf_counter() - t
+    log.info(
+        "ground: %d of %d points in the field, %d x %d cells of %.2f m (%.1f s)",
+        len(xyz), len(inp.cloud), *ground.shape[::-1], ground.cell, timings["ground"],
+    )  # fmt: skip
+    t = time.perf_counter()
+    h = xyz[:, 2] - ground.height(xyz[:, 0], xyz[:, 1])
+    table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
+    timings["traits"] = time.perf_counter() - t
+    counts = {q: table.quality.count(q) for q in (OK, OCCLUDED, NO_POINTS)}
+    log.info(
+        "traits: %d plots (%s) (%.1f s)",
+        len(table.quality),
+        ", ".join(f"{n} {q}" for q, n in counts.items()),
+        timings["traits"],
+    )
+    return RunTraits(
+        run_dir=inp.run_dir,
+        mission=str(inp.mission.get("id", "")),
+        layout=inp.layout,
+        field=inp.field,
+        records=inp.records,
+        table=table,
+        ground=ground,
+        date=inp.date,
+        date_source=inp.date_source,
+        timings=timings,
+    )
+
+
+def compute_run(
+    run_dir: str | Path, cfg: TraitsConfig | None = None, date: str | None = None
+) -> RunTraits:
+    """Read ``run_dir`` and compute its traits (``date``: ``--date``, see
+    :mod:`.run`); raises RunError."""
+    t = time.perf_counter()
+    inp = load_run(run_dir, date)
+    read = time.perf_counter() - t
+    log.info(
+        "read %s: %d points, %d plots (%.1f s)", run_dir, len(inp.cloud), inp.field.n_plots, read
+    )
+    out = compute_traits(inp, cfg or TraitsConfig())
+    out.timings["read"] = read
+    return out

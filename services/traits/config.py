@@ -1,0 +1,106 @@
+"""The traits job's options: the manifest's ``[services.traits]`` section, read by
+``phenorover traits`` and by the traits job the mission service may start after
+registration, so both measure alike.
+
+Where they come from, each over the one before (as for ``phenorover register``): the
+defaults, the manifest's ``[services.traits]`` (``--manifest``), a TOML file holding
+just that section (``--config``, which replaces the manifest's), ``--set key=value``
+overrides (TOML values: ``--set definition.cell=0.1``, ``--set ground.rigidness=2``)
+and ``--figures``/``--no-figures``. What each trait is stays
+:class:`common.canopy.CanopyDefinition`'s; only its parameters are set here.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Annotated
+
+import msgspec
+
+from common.canopy import CanopyDefinition
+from common.config import Manifest
+
+NAME = "traits"
+
+Metres = Annotated[float, msgspec.Meta(gt=0.0, le=10.0)]
+
+
+class GroundConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """How the ground is found (:mod:`.ground`), metres.
+
+    The cloth simulation filter (Zhang et al. 2016, Remote Sens. 8:501) runs on the
+    lowest point of every ``reduce_cell`` square, which keeps the ground and drops
+    most of the canopy before the filter sees it (seconds instead of minutes on a
+    survey). ``cloth_resolution``, ``rigidness`` (1 steep, 2 relief, 3 flat: a breeding
+    field is flat, and a stiff cloth bridges a plot's canopy instead of sagging into
+    it), ``class_threshold`` (how far above the cloth a point is still ground),
+    ``slope_smooth`` and ``iterations`` are the filter's. The ground model is the
+    median of the ground points in ``grid_cell`` squares, holes filled from the
+    nearest measured square; ``crop_margin``: how far beyond the field boundary
+    points are kept (the scanner sees tens of metres past it, traits need none).
+    ``max_step``: a ground square more than this above the median of the squares
+    within ``step_window`` is canopy the filter let through, dropped and refilled.
+    ``refine_band``: the ground model is then made again from every point of the
+    cloud within this of it (0: no second pass), since the lowest points the filter
+    saw lie below the surface by the range noise (about 1 cm at 1 cm noise); keep
+    it under ``definition.min_height`` so no canopy enters.
+    """
+
+    reduce_cell: Annotated[float, msgspec.Meta(ge=0.01, le=1.0)] = 0.08
+    cloth_resolution: Annotated[float, msgspec.Meta(ge=0.05, le=5.0)] = 0.3
+    rigidness: Annotated[int, msgspec.Meta(ge=1, le=3)] = 3
+    class_threshold: Annotated[float, msgspec.Meta(gt=0.0, le=2.0)] = 0.1
+    slope_smooth: bool = True
+    iterations: Annotated[int, msgspec.Meta(ge=10, le=5000)] = 500
+    grid_cell: Annotated[float, msgspec.Meta(ge=0.05, le=5.0)] = 0.25
+    crop_margin: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 1.0
+    max_step: Metres = 0.15
+    step_window: Metres = 3.0
+    refine_band: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.03
+
+
+class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """``[services.traits]``: ``definition`` (the traits' parameters,
+    :class:`common.canopy.CanopyDefinition`), ``ground`` (:class:`GroundConfig`),
+    ``min_seen`` (a plot whose footprint cells holding a point are fewer than this
+    share is flagged ``occluded``: its traits describe only the part the scanner saw)
+    and ``figures`` (write ``fieldmap.png``)."""
+
+    definition: CanopyDefinition = CanopyDefinition()
+    ground: GroundConfig = GroundConfig()
+    min_seen: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
+    figures: bool = True
+
+
+def add_config_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags that choose the options (see the module docstring)."""
+    p.add_argument(
+        "--manifest", type=Path, default=None, help="deploy manifest; uses [services.traits]"
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="a TOML file holding just the [services.traits] section (replaces the manifest's)",
+    )
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override")
+    p.add_argument(
+        "--figures",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="write fieldmap.png (default: yes)",
+    )
+
+
+def resolve(args: argparse.Namespace) -> tuple[TraitsConfig, Manifest | None]:
+    """The effective options and the manifest (None without ``--manifest``) from the
+    flags of :func:`add_config_arguments`. Raises ConfigError, one line naming the
+    file and the key."""
+    from common.service import resolve_config
+
+    overrides = list(args.set)
+    if args.figures is not None:
+        overrides.append(f"figures={str(args.figures).lower()}")
+    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
+    return resolve_config(NAME, TraitsConfig, ns)
