@@ -25,9 +25,12 @@ def strategy_for(t: mi.Type) -> st.SearchStrategy[Any]:
     if isinstance(t, mi.StrType):
         if t.pattern is not None:
             return st.from_regex(t.pattern, fullmatch=True)
-        return st.text(max_size=20)
+        lo = t.min_length or 0
+        return st.text(min_size=lo, max_size=max(lo, min(t.max_length or 20, 20)))
     if isinstance(t, mi.BytesType):
         return st.binary(max_size=64)
+    if isinstance(t, mi.DateType):
+        return st.dates()
     if isinstance(t, mi.NoneType):
         return st.none()
     if isinstance(t, mi.EnumType):

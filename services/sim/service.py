@@ -7,7 +7,8 @@ The world is the deployment's field (``--field`` or the manifest's ``field``), t
 same one every other service plans and navigates in. Its state is saved every
 ``snapshot_s`` (see :mod:`services.sim.snapshot`), and a restarted simulator carries
 on from it. Rendered scans go only under the scan folder (see
-:mod:`services.sim.storage`)."""
+:mod:`services.sim.storage`). The true plants are written once at start, for the
+evaluation only (``<run_dir>/sim/plants.truth.json``, :mod:`services.sim.truth_file`)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ from services.sim.lidar import beam_angles
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, confine
-from services.sim.truth_file import ScanTruth, write_truth
+from services.sim.truth_file import scan_truth, write_plant_truth, write_truth
 from services.sim.world import World
 
 
@@ -65,6 +66,10 @@ class SimService:
         self.faults = FaultSchedule(cfg.faults)
         self.imu = ImuModel(cfg.imu, cfg.seed, ctx.robot.imu)
         self.snap_path = snapshot.snapshot_path(ctx.run_dir)
+        try:  # evaluation only: the true plants, beside the world snapshot
+            ctx.log.info("plants' truth: %s", write_plant_truth(self.snap_path.parent, self.world))
+        except OSError as exc:  # a run folder we cannot write must not stop the world
+            ctx.log.warning("cannot write the plants' truth: %s", exc)
         self.world_id = snapshot.fingerprint(layout, fld, cfg.world, ctx.robot)
         if cfg.resume:
             self._resume()
@@ -149,19 +154,7 @@ class SimService:
             write_e57(path, scan.points, scan.intensity, name=path.stem)
             st = self.state
             # evaluation only: lets `phenorover register` score against the truth
-            write_truth(
-                path,
-                ScanTruth(
-                    stamp_ns=self.sim_ns,
-                    scanner_pose=pose.tolist(),
-                    x=st.x,
-                    y=st.y,
-                    z=st.z,
-                    roll=st.roll,
-                    pitch=st.pitch,
-                    yaw=st.yaw,
-                ),
-            )
+            write_truth(path, scan_truth(self.sim_ns, pose, st))
         return RenderReply(
             stamp_ns=self.sim_ns,
             path=str(path),

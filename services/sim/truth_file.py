@@ -1,19 +1,40 @@
-"""Ground truth of a simulated scan, written next to its E57 for evaluation only.
+"""Ground truth the simulator writes for the evaluation only: of every scan, and of
+the plants.
 
 The simulator knows where the scanner really stood; a real scanner does not, so this
 file exists only in simulation. The simulator writes it (this module: its schema and
 writer); only the evaluation reads it (``phenorover/eval/register/truth.py``, behind
 ``phenorover eval register``). Nothing that places or registers scans may use it.
 ``<scan>.e57`` gets ``<scan>.truth.json``.
+
+The plants' truth (:class:`PlantTruth`: every plot's true canopy traits, computed from
+the simulated plants by :mod:`services.sim.plant_truth`, and what its plants were
+grown from) is written once when the simulator starts, as
+``<run_dir>/sim/plants.truth.json`` beside the world snapshot. Only the evaluation
+reads it (to score measured traits and plans made from a survey); no product service
+(traits, planner, mission) may open it.
 """
 
 from __future__ import annotations
 
+import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import msgspec
+import numpy as np
+import numpy.typing as npt
 
+from common.canopy import CanopyDefinition
+from services.sim.plant_truth import plant_truth
+from services.sim.robot import RobotState
 from services.sim.storage import write_atomic
+from services.sim.trial import TrialConfig
+
+if TYPE_CHECKING:
+    from services.sim.world import World
+
+PLANTS_TRUTH = "plants.truth.json"
 
 
 class ScanTruth(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -40,3 +61,61 @@ def truth_path(scan: str | Path) -> Path:
 def write_truth(scan: str | Path, truth: ScanTruth) -> None:
     """Write the truth beside ``scan``, whole or not at all (temporary name, renamed)."""
     write_atomic(truth_path(scan), msgspec.json.encode(truth))
+
+
+def scan_truth(stamp_ns: int, pose: npt.NDArray[np.float64], st: RobotState) -> ScanTruth:
+    """The truth of a scan measured at ``stamp_ns`` from ``pose`` (4x4) with the robot
+    at ``st``."""
+    return ScanTruth(
+        stamp_ns=stamp_ns,
+        scanner_pose=pose.tolist(),
+        x=st.x,
+        y=st.y,
+        z=st.z,
+        roll=st.roll,
+        pitch=st.pitch,
+        yaw=st.yaw,
+    )
+
+
+class PlantTruth(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """The true plants of a simulated field (evaluation only). ``date``: the survey
+    date (None: mature plants); ``days_after_planting`` from the field's
+    ``planting_date``; ``trial``: the world's trial config; ``definition``: the canopy
+    definition the traits follow; ``plots``: one row per plot in plot order (see
+    :mod:`services.sim.plant_truth`; metres, m2, m3, field frame)."""
+
+    evaluation_only: bool = True
+    field: str
+    seed: int
+    date: datetime.date | None
+    planting_date: datetime.date | None
+    days_after_planting: int | None
+    trial: TrialConfig
+    definition: CanopyDefinition
+    plots: list[dict[str, Any]]
+
+
+def plant_truth_of(world: World, definition: CanopyDefinition | None = None) -> PlantTruth:
+    """The plants' truth of ``world``."""
+    d = definition or CanopyDefinition()
+    w, plan = world, world.trial
+    return PlantTruth(
+        field=w.field.name,
+        seed=w.cfg.seed,
+        date=w.cfg.trial.date,
+        planting_date=w.layout.planting_date,
+        days_after_planting=None if plan is None else plan.days,
+        trial=w.cfg.trial,
+        definition=d,
+        plots=plant_truth(w.layout, w.field, w.terrain, w.foliage, plan, d),
+    )
+
+
+def write_plant_truth(folder: Path, world: World) -> Path:
+    """Write ``world``'s plant truth as ``folder/plants.truth.json``, whole or not at
+    all; returns its path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / PLANTS_TRUTH
+    write_atomic(path, msgspec.json.encode(plant_truth_of(world)))
+    return path

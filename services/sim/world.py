@@ -7,7 +7,6 @@ radians) and is the ground truth the evaluation scores against.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 from typing import Annotated
 
@@ -20,10 +19,10 @@ from common.geo import rot_zyx
 from common.robot import Robot, default_robot
 from services.sim import lidar as lidar_mod
 from services.sim import robot as robot_mod
-from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
+from services.sim.foliage import Foliage, FoliageConfig, build_foliage
 from services.sim.render import FaroNoise, Scan, ScanSettings, render
 from services.sim.robot import RobotConfig, RobotState
-from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
+from services.sim.scene import OBSTACLE, PLOT, POLE, SPHERE, Scene
 from services.sim.sky import SkyMask
 from services.sim.targets import (
     Survey,
@@ -33,6 +32,8 @@ from services.sim.targets import (
     drive_network,
 )
 from services.sim.terrain import Terrain, TerrainConfig, build_terrain
+from services.sim.trial import TrialConfig, TrialPlan, plan_trial
+from services.sim.truth_points import truth_points
 
 F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
@@ -78,8 +79,9 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """Everything that shapes the world. ``seed`` seeds terrain, plants and target
     heights (sensor noise takes the caller's generator). ``soil``: traction factor of
     the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky; ``soil_zones``:
-    rectangles with a soil of their own (the paper's southern paths). Where the
-    robot's sensors sit is the robot description's, not the world's (:class:`World`)."""
+    rectangles with a soil of their own (the paper's southern paths). ``trial``: how
+    the plots vary and the survey date (:mod:`services.sim.trial`). Where the robot's
+    sensors sit is the robot description's, not the world's (:class:`World`)."""
 
     seed: int = 0
     terrain: TerrainConfig = TerrainConfig()
@@ -91,6 +93,7 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     robot: RobotConfig = RobotConfig()
     scanner_noise: FaroNoise = FaroNoise()
     lidar: lidar_mod.LidarConfig = lidar_mod.LidarConfig()
+    trial: TrialConfig = TrialConfig()
 
 
 def _obstacle_arrays(obstacles: list[Obstacle], terrain: Terrain) -> tuple[F64, F64]:
@@ -123,7 +126,12 @@ class World:
         self.cfg = cfg = cfg or WorldConfig()
         self.robot = robot or default_robot()
         self.terrain: Terrain = build_terrain(field.bounds, cfg.terrain, cfg.seed)
-        self.foliage: Foliage = build_foliage(field.plot_boxes, self.terrain, cfg.foliage, cfg.seed)
+        # the trial's plan (None: every plot the same plants, as ENGR and SPL are)
+        self.trial: TrialPlan | None = plan_trial(layout, field, cfg.foliage, cfg.trial, cfg.seed)
+        plans = None if self.trial is None else [p.growth for p in self.trial.plots]
+        self.foliage: Foliage = build_foliage(
+            field.plot_boxes, self.terrain, cfg.foliage, cfg.seed, plans
+        )
         ob_boxes, ob_cyls = _obstacle_arrays(cfg.obstacles, self.terrain)
         self.targets: Targets = self._place_targets(ob_cyls, ob_boxes)
         n = len(self.targets.spheres)
@@ -140,6 +148,9 @@ class World:
         )
         # the GNSS antennas' sky: each plot's canopy top stands on the ground at its centre
         canopy = field.plot_boxes.copy()
+        if self.trial is not None:  # a trial's crop is as tall as its tallest plant
+            tallest = [float(p.growth.heights.max()) for p in self.trial.plots]
+            canopy[:, 5] = np.minimum(canopy[:, 5], canopy[:, 2] + np.array(tallest))
         centre = canopy[:, [0, 1]] / 2 + canopy[:, [3, 4]] / 2
         canopy[:, 5] += self.terrain.height(centre[:, 0], centre[:, 1])
         self.sky = SkyMask(canopy)
@@ -266,47 +277,6 @@ class World:
         return lidar_mod.scan(scene, state, self.cfg.lidar, rng, self.robot.lidar)
 
     def truth_points(self, spacing: float = 0.05) -> tuple[F64, U8]:
-        """A dense, deterministic sample of every surface (field frame, m) with labels:
-        ground on a ``spacing`` grid over the field bounds, the exposed foliage voxels
-        (centres of occupied voxels with an empty face-neighbour), and sphere and pole
-        surfaces at about ``spacing``. For scoring registrations (cloud-to-truth)."""
-        if not spacing > 0:
-            raise ValueError(f"spacing must be > 0 m, got {spacing}")
-        xmin, ymin, xmax, ymax = self.field.bounds
-        gx, gy = np.meshgrid(np.arange(xmin, xmax, spacing), np.arange(ymin, ymax, spacing))
-        parts = [np.column_stack([gx.ravel(), gy.ravel(), self.terrain.height(gx, gy).ravel()])]
-        labels = [np.full(gx.size, GROUND, np.uint8)]
-        fol = self.foliage
-        for p in range(fol.n_plots):
-            g = fol.grid(p)
-            occ = g != EMPTY
-            pad = np.pad(occ, 1, constant_values=False)
-            inner = pad[2:, 1:-1, 1:-1] & pad[:-2, 1:-1, 1:-1] & pad[1:-1, 2:, 1:-1]
-            inner &= pad[1:-1, :-2, 1:-1] & pad[1:-1, 1:-1, 2:] & pad[1:-1, 1:-1, :-2]
-            idx = np.argwhere(occ & ~inner)
-            parts.append(fol.origin[p] + (idx + 0.5) * fol.voxel)
-            labels.append(np.where(g[tuple(idx.T)] == 2, STEM_HIT, LEAF_HIT).astype(np.uint8))
-        for c in self.targets.spheres:
-            n = max(8, int(4 * math.pi * c[3] ** 2 / spacing**2))
-            parts.append(c[:3] + c[3] * _fibonacci_sphere(n))
-            labels.append(np.full(n, SPHERE, np.uint8))
-        for x, y, zlo, zhi, r in self.targets.poles:
-            z = np.arange(max(zlo, float(self.terrain.height(x, y))), zhi, spacing)
-            a = np.arange(0, 2 * math.pi, max(spacing / r, math.pi / 4))
-            zz, aa = np.meshgrid(z, a)
-            parts.append(
-                np.column_stack(
-                    [x + r * np.cos(aa.ravel()), y + r * np.sin(aa.ravel()), zz.ravel()]
-                )
-            )
-            labels.append(np.full(zz.size, POLE, np.uint8))
-        return np.vstack(parts), np.concatenate(labels)
-
-
-def _fibonacci_sphere(n: int) -> F64:
-    """``n`` nearly uniform unit vectors."""
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    phi = math.pi * (3 - math.sqrt(5)) * k
-    rr = np.sqrt(1 - z * z)
-    return np.column_stack([rr * np.cos(phi), rr * np.sin(phi), z])
+        """A dense, deterministic sample of every surface with labels, for scoring
+        registrations cloud-to-truth (see :func:`services.sim.truth_points.truth_points`)."""
+        return truth_points(self.field, self.terrain, self.foliage, self.targets, spacing)

@@ -74,9 +74,11 @@ def example(t: mi.Type) -> Any:
     if isinstance(t, mi.FloatType):
         return next(v for v in (0.0, 1.0, 0.5, -1.0) if _float_ok(t, v))
     if isinstance(t, mi.StrType):
-        return ""
+        return "x" * (t.min_length or 0)
     if isinstance(t, mi.BytesType):
         return b""
+    if isinstance(t, mi.DateType):
+        return "2026-05-01"
     if isinstance(t, mi.NoneType):
         return None
     if isinstance(t, mi.EnumType):
