@@ -8,8 +8,10 @@ options it ran with: :mod:`.config`, the manifest's ``[services.traits]``,
 ``--config``, ``--set`` and the flags). See :mod:`.outputs` for the files and
 :mod:`.run` for where the survey date comes from (``--date`` overrides it).
 
-Several run folders: each run's outputs go into its own folder (into
-``--out/<run folder name>`` with ``--out``).
+Several run folders of one field: a season (:mod:`.series`): each run's outputs go
+into its own folder (into ``--out/<run folder name>`` with ``--out``) and the
+season's (:mod:`.season_outputs`) into ``--out`` (default: ``season-<field>`` beside
+the last run).
 
 Every file is written under a temporary name and renamed when complete, so an
 interrupted run leaves the previous outputs (or none), never half a file. Bad input
@@ -77,15 +79,40 @@ def _summary(rt: RunTraits, out: Path, seconds: float) -> str:
     )
 
 
+def run_season(runs: list[Path], cfg: TraitsConfig, out: Path | None) -> Path:
+    """A season of ``runs``: each run's own files in its folder (or ``out/<run>``),
+    the season's in ``out`` (default: ``season-<field>`` beside the last run)."""
+    from services.traits.season_outputs import write_season
+    from services.traits.series import season
+
+    t0 = time.monotonic()
+    s = season(runs, cfg)
+    for rt in s.runs:
+        dest = rt.run_dir if out is None else out / rt.run_dir.name
+        write_outputs(rt, cfg, dest)
+        print(_summary(rt, dest, sum(rt.timings.values())), flush=True)
+    dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
+    names = write_season(s, dest, cfg.figures)
+    print(
+        f"season of {len(s.runs)} dates ({s.runs[0].date} to {s.runs[-1].date}) in "
+        f"{time.monotonic() - t0:.1f} s: {', '.join(str(dest / n) for n in names[:1])}",
+        flush=True,
+    )
+    return dest
+
+
 def cmd_traits(args: argparse.Namespace) -> int:
     runs: list[Path] = list(args.run_dir)
     try:
         cfg, _ = resolve(args)
-        for run in runs:
-            t0 = time.monotonic()
-            out = args.out if args.out is None or len(runs) == 1 else args.out / run.name
-            rt, _ = run_traits(run, cfg, out, args.date)
-            print(_summary(rt, out or run, time.monotonic() - t0), flush=True)
+        if len(runs) > 1:
+            if args.date is not None:
+                raise RunError("--date names one survey's date: give it with one RUN_DIR")
+            run_season(runs, cfg, args.out)
+            return 0
+        t0 = time.monotonic()
+        rt, _ = run_traits(runs[0], cfg, args.out, args.date)
+        print(_summary(rt, args.out or runs[0], time.monotonic() - t0), flush=True)
     except (RunError, ValueError, OSError) as exc:
         print(f"phenorover traits: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

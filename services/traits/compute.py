@@ -145,10 +145,9 @@ def trait_table(
     return TraitTable(records, values, quality, date, cfg.definition)
 
 
-def compute_traits(inp: RunInput, cfg: TraitsConfig) -> RunTraits:
-    """The traits of a read run (:func:`.run.load_run`); raises RunError when no
-    ground is found."""
-    timings: dict[str, float] = {}
+def field_ground(inp: RunInput, cfg: TraitsConfig) -> tuple[F64, GroundModel, float]:
+    """The run's points over its field (and ``crop_margin`` around it), the ground
+    found in them and the seconds it took; raises RunError when no ground is found."""
     b = inp.field.bounds
     m = cfg.ground.crop_margin
     xyz = inp.cloud
@@ -164,13 +163,31 @@ def compute_traits(inp: RunInput, cfg: TraitsConfig) -> RunTraits:
         ground = fit_ground(xyz, np.array([b[0] - m, b[1] - m, b[2] + m, b[3] + m]), cfg.ground)
     except GroundError as exc:
         raise RunError(f"{inp.run_dir / 'registered.laz'}: {exc}") from None
-    timings["ground"] = time.perf_counter() - t
+    took = time.perf_counter() - t
     log.info(
         "ground: %d of %d points in the field, %d x %d cells of %.2f m (%.1f s)",
-        len(xyz), len(inp.cloud), *ground.shape[::-1], ground.cell, timings["ground"],
+        len(xyz), len(inp.cloud), *ground.shape[::-1], ground.cell, took,
     )  # fmt: skip
+    return xyz, ground, took
+
+
+def compute_traits(
+    inp: RunInput,
+    cfg: TraitsConfig,
+    found: tuple[F64, GroundModel, float] | None = None,
+    heights_from: GroundModel | None = None,
+    dz: float = 0.0,
+) -> RunTraits:
+    """The traits of a read run (:func:`.run.load_run`); raises RunError when no
+    ground is found. ``found``: :func:`field_ground` of this run, when already
+    computed. ``heights_from``: the ground heights are measured from (default: the
+    run's own), raised by ``dz`` metres (a season's reference date's ground, moved
+    onto this date by the vertical offset between them)."""
+    xyz, ground, took = found if found is not None else field_ground(inp, cfg)
+    timings: dict[str, float] = {"ground": took}
     t = time.perf_counter()
-    h = xyz[:, 2] - ground.height(xyz[:, 0], xyz[:, 1])
+    base = heights_from or ground
+    h = xyz[:, 2] - base.height(xyz[:, 0], xyz[:, 1]) - dz
     table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
     timings["traits"] = time.perf_counter() - t
     counts = {q: table.quality.count(q) for q in (OK, OCCLUDED, NO_POINTS)}

@@ -65,12 +65,18 @@ class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     :class:`common.canopy.CanopyDefinition`), ``ground`` (:class:`GroundConfig`),
     ``min_seen`` (a plot whose footprint cells holding a point are fewer than this
     share is flagged ``occluded``: its traits describe only the part the scanner saw)
-    and ``figures`` (write ``fieldmap.png``)."""
+    and ``figures`` (write ``fieldmap.png`` and ``growth.png``). A season
+    (:mod:`.series`): ``stable_margin``, how far from every plot a ground cell must be
+    to count as stable (lanes, headlands: m); ``offset_tolerance_m``, the vertical
+    offset between two dates' stable ground above which heights are corrected by it
+    (1 cm: smaller ones are within what registration achieves)."""
 
     definition: CanopyDefinition = CanopyDefinition()
     ground: GroundConfig = GroundConfig()
     min_seen: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
     figures: bool = True
+    stable_margin: Annotated[float, msgspec.Meta(ge=0.0, le=5.0)] = 0.3
+    offset_tolerance_m: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.01
 
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:

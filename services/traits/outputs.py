@@ -185,6 +185,16 @@ def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
 
         atomic_write(out / "fieldmap.png", lambda p: draw(rt, p))
         names.append("fieldmap.png")
+    from services.traits import breeding
+
+    h2 = None
+    if breeding.has_entries(t):
+        h2 = breeding.heritabilities(t)
+        atomic_write(out / "entries.csv", _text(breeding.entries_csv(t)))
+        atomic_write(out / "heritability.csv", _text(breeding.heritability_csv(h2)))
+        names += ["entries.csv", "heritability.csv"]
+    atomic_write(out / "traits.md", _text(breeding.report(rt, h2)))
+    names.append("traits.md")
     atomic_write(out / "traits.toml", _text(options_toml(rt, cfg)))
     names.append("traits.toml")
     return names

@@ -48,15 +48,6 @@ def test_phenorover_traits_with_out_and_date(run_copy: Path, tmp_path: Path) -> 
     assert not (out / "fieldmap.png").exists() and not (run_copy / "traits.csv").exists()
 
 
-def test_several_runs_each_get_their_outputs(run_copy: Path, tmp_path: Path) -> None:
-    second = tmp_path / "tiny-2"
-    shutil.copytree(run_copy, second)
-    out = tmp_path / "out"
-    assert main([str(run_copy), str(second), "--out", str(out), "--no-figures"]) == 0
-    assert (out / run_copy.name / "traits.csv").is_file()
-    assert (out / "tiny-2" / "traits.csv").is_file()
-
-
 def test_no_mission_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(tmp_path)]) == 2
     assert "mission.db" in _one_error_line(capsys)

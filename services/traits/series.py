@@ -1,0 +1,126 @@
+"""A season: the traits of several surveys of one field, as per-plot series.
+
+Before any change is measured the dates are checked against each other on stable
+ground (lanes and headlands, more than ``stable_margin`` from every plot): the median
+vertical offset of each date's ground against the earliest date's
+(:func:`.season.vertical_offset`). Heights are then measured above one ground for
+every date, the earliest survey's (it sees the most bare soil; under a closed canopy
+a later survey's ground is interpolated from the lanes), moved onto each date by its
+offset when the offset exceeds ``offset_tolerance_m`` (smaller ones are within what
+registration achieves, and correcting them would add their noise). Then per plot:
+growth between consecutive dates, and a logistic growth curve (:func:`.season.
+fit_logistic`) once there are three dates or more.
+
+Refused, one line each: runs of different fields, runs without a date, two runs of
+one date.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import itertools
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from services.traits.compute import OK, RunTraits, compute_traits, field_ground
+from services.traits.config import TraitsConfig
+from services.traits.run import RunError, RunInput, load_run
+from services.traits.season import LogisticFit, Offset, fit_all, growth, vertical_offset
+
+F64 = npt.NDArray[np.float64]
+log = logging.getLogger("phenorover.traits")
+
+
+@dataclasses.dataclass(frozen=True)
+class Season:
+    """Several dates of one field, in date order. ``days``: days after planting (the
+    field's ``planting_date``; without one, days since the first survey);
+    ``offsets[d]``: date ``d``'s ground against the first date's (None for the first);
+    ``corrected[d]``: whether heights were moved by it; ``height`` (D, P): the height
+    trait of the plots flagged ok (NaN otherwise); ``growth`` (D - 1, P); ``fits``
+    per plot (empty with fewer than three dates)."""
+
+    runs: list[RunTraits]
+    days: F64
+    offsets: list[Offset | None]
+    corrected: list[bool]
+    height: F64
+    growth: F64
+    fits: list[LogisticFit]
+
+
+def _same_field(inputs: Sequence[RunInput]) -> None:
+    a = inputs[0]
+    for b in inputs[1:]:
+        same = a.layout.name == b.layout.name and np.array_equal(
+            a.field.plot_boxes, b.field.plot_boxes
+        )
+        if not same:
+            raise RunError(
+                f"{a.run_dir} and {b.run_dir} are surveys of different fields "
+                f"({a.layout.name!r}, {a.field.n_plots} plots; {b.layout.name!r}, "
+                f"{b.field.n_plots} plots)"
+            )
+
+
+def _dated(inputs: Sequence[RunInput]) -> list[RunInput]:
+    for inp in inputs:
+        if not inp.date:
+            raise RunError(
+                f"{inp.run_dir}: no survey date, which a season needs (a mission on a "
+                "wall clock has one; a simulated one takes [services.sim.world.trial] date)"
+            )
+    ordered = sorted(inputs, key=lambda i: i.date)
+    for a, b in itertools.pairwise(ordered):
+        if a.date == b.date:
+            raise RunError(f"{a.run_dir} and {b.run_dir} are both surveys of {a.date}")
+    return ordered
+
+
+def _days(inputs: Sequence[RunInput]) -> F64:
+    dates = [datetime.date.fromisoformat(i.date) for i in inputs]
+    start = inputs[0].layout.planting_date or dates[0]
+    return np.array([(d - start).days for d in dates], dtype=np.float64)
+
+
+def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig) -> Season:
+    """Read and compute the traits of every run as one season; raises RunError."""
+    inputs = _dated([load_run(r) for r in run_dirs])
+    _same_field(inputs)
+    found = [field_ground(inp, cfg) for inp in inputs]
+    ref = found[0][1]
+    boxes = inputs[0].field.plot_boxes
+    stable_ref = ref.stable_mask(boxes, cfg.stable_margin)
+    offsets: list[Offset | None] = [None]
+    corrected = [False]
+    runs = [compute_traits(inputs[0], cfg, found[0])]
+    for inp, f in zip(inputs[1:], found[1:], strict=True):
+        g = f[1]
+        try:
+            off = vertical_offset(
+                ref.z,
+                g.z,
+                stable_ref & g.stable_mask(boxes, cfg.stable_margin),
+                tolerance_m=cfg.offset_tolerance_m,
+            )
+        except ValueError as exc:
+            raise RunError(f"{inp.run_dir} against {inputs[0].run_dir}: {exc}") from None
+        offsets.append(off)
+        corrected.append(off.exceeds)
+        dz = off.median_m if off.exceeds else 0.0
+        log.info(
+            "%s: ground %+.1f mm against %s over %d stable cells%s",
+            inp.date, off.median_m * 1000, inputs[0].date, off.n_cells,
+            ", corrected" if off.exceeds else "",
+        )  # fmt: skip
+        runs.append(compute_traits(inp, cfg, f, heights_from=ref, dz=dz))
+    days = _days(inputs)
+    ok = np.array([[q == OK for q in r.table.quality] for r in runs])
+    height = np.where(ok, np.array([r.table.column("height") for r in runs]), np.nan)
+    fits = fit_all(days, height) if len(runs) >= 3 else []
+    return Season(runs, days, offsets, corrected, height, growth(height, days), fits)
