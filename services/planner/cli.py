@@ -12,7 +12,7 @@ from typing import TextIO
 
 from common.config import ConfigError
 from common.field import FieldError
-from common.messages.plan import PlanOptions, PlanResult
+from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.robot import load_robot, scanner_model
 from services.planner.outputs import write_all
 from services.planner.request import request_from_source
@@ -32,6 +32,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--robot", default="", help="robot description: its scanner height (default: Husky)"
     )
     p.add_argument("--remote", action="store_true", help="ask the planner service")
+    p.add_argument(
+        "--from-survey",
+        type=Path,
+        default=None,
+        metavar="RUN_DIR",
+        help="plan on the crop a survey measured (RUN_DIR/crop.json); compares with nominal",
+    )
     p.add_argument("--manifest", type=Path, default=None)
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
     p.add_argument("--timeout", type=float, default=300.0)
@@ -107,6 +114,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     except (FieldError, ConfigError) as exc:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2
+    if args.from_survey is not None:
+        return _from_survey(args, req)
     if args.remote:
         from common.client import connect_or_explain
         from common.keys import PLANNER_PLAN
@@ -134,6 +143,28 @@ def cmd_plan(args: argparse.Namespace) -> int:
             print(f"phenorover plan: {exc}", file=sys.stderr)
             return 2
     print(summary(result))
+    return _write(args, result)
+
+
+def _from_survey(args: argparse.Namespace, req: PlanRequest) -> int:
+    """Plan on the measured crop (locally), and on the nominal field to compare."""
+    from services.planner.measured import compare, plan_from_survey
+
+    if args.remote:
+        print("phenorover plan: --from-survey plans locally; drop --remote", file=sys.stderr)
+        return 2
+    try:
+        nominal, result = plan_from_survey(req, args.from_survey, ProgressBar("visibility"))
+    except (FieldError, ValueError) as exc:
+        print(f"phenorover plan: {exc}", file=sys.stderr)
+        return 2
+    print(summary(result))
+    print("against the nominal plan of the same field (planned too, for this comparison):")
+    print(compare(nominal, result))
+    return _write(args, result)
+
+
+def _write(args: argparse.Namespace, result: PlanResult) -> int:
     out = args.out or Path("runs") / f"plan-{result.field}"
     files = write_all(result, out)
     print("wrote " + ", ".join(str(p) for p in files.values()))

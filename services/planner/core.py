@@ -7,6 +7,7 @@ import logging
 import time
 
 import numpy as np
+import numpy.typing as npt
 
 from common.field import Field, FieldLayout, ScannerModel, build_field
 from common.messages.core import Array
@@ -50,10 +51,13 @@ def plan(
     *,
     field: Field | None = None,
     progress: Progress | None = None,
+    targets: npt.NDArray[np.bool_] | None = None,
 ) -> PlanResult:
     """Plan a survey of ``layout`` (or of ``field`` when given, e.g. one loaded from
-    GeoJSON). ``progress(done, total)`` follows the visibility stage. Raises ValueError
-    on inconsistent options (such as a lane index outside the field)."""
+    GeoJSON). ``progress(done, total)`` follows the visibility stage. ``targets``: a
+    flag per cell of the field, the cells to cover (None: all; e.g. no gaps in a
+    measured crop); the others still occlude. Raises ValueError on inconsistent
+    options (such as a lane index outside the field)."""
     scanner = scanner or ScannerModel()
     opt = options or PlanOptions()
     timings: dict[str, float] = {}
@@ -72,7 +76,11 @@ def plan(
         progress=progress,
     )
     timings["visibility"] = time.perf_counter() - t
-    mat = vis.matrix(opt.min_hits)
+    every = vis.matrix(opt.min_hits)
+    if targets is not None and targets.shape != (fld.n_cells,):
+        raise ValueError(f"targets: {targets.shape} flags for {fld.n_cells} cells")
+    # the cover, and every count of cells, only over the target cells
+    mat = every if targets is None else every[:, np.flatnonzero(targets)]
     seen = np.asarray(mat.sum(axis=1)).ravel()
     views = np.asarray(mat.sum(axis=0)).ravel()
     near = vis.cell_min_range()
@@ -156,5 +164,5 @@ def plan(
         ),
         legs=legs,
         timings=timings,
-        cell_views=Array.of(np.asarray(mat[sel].sum(axis=0), dtype=np.int64).ravel()),
+        cell_views=Array.of(np.asarray(every[sel].sum(axis=0), dtype=np.int64).ravel()),
     )

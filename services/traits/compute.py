@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import TRAITS, CanopyDefinition, plot_traits
+from common.cropmodel import CropModel, crop_model
 from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
@@ -67,6 +68,8 @@ class RunTraits:
     date: str
     date_source: str
     timings: dict[str, float]
+    # the plots as measured, for planning the next survey (``crop.json``)
+    crop: CropModel | None = None
 
 
 def _bands(lo: F64, hi: F64, band: I64) -> tuple[F64, F64, I64]:
@@ -189,6 +192,9 @@ def compute_traits(
     base = heights_from or ground
     h = xyz[:, 2] - base.height(xyz[:, 0], xyz[:, 1]) - dz
     table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
+    crop = crop_model(
+        xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date
+    )
     timings["traits"] = time.perf_counter() - t
     counts = {q: table.quality.count(q) for q in (OK, OCCLUDED, NO_POINTS)}
     log.info(
@@ -208,6 +214,7 @@ def compute_traits(
         date=inp.date,
         date_source=inp.date_source,
         timings=timings,
+        crop=crop,
     )
 
 

@@ -195,6 +195,11 @@ def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
         names += ["entries.csv", "heritability.csv"]
     atomic_write(out / "traits.md", _text(breeding.report(rt, h2)))
     names.append("traits.md")
+    if rt.crop is not None:  # what `phenorover plan --from-survey` plans on
+        from common.cropmodel import write as write_crop
+
+        write_crop(out / "crop.json", rt.crop)
+        names.append("crop.json")
     atomic_write(out / "traits.toml", _text(options_toml(rt, cfg)))
     names.append("traits.toml")
     return names

@@ -12,7 +12,17 @@ from phenorover.cli import main as phenorover_main
 from services.traits.cli import main
 from tests.traits.conftest import TINY, plan_for, write_run
 
-OUTPUTS = ("traits.csv", "traits_long.csv", "traits.geojson", "fieldmap.png", "traits.toml")
+OUTPUTS = (
+    "traits.csv",
+    "traits_long.csv",
+    "traits.geojson",
+    "fieldmap.png",
+    "traits.toml",
+    "traits.md",
+    "entries.csv",
+    "heritability.csv",
+    "crop.json",
+)
 
 
 @pytest.fixture
