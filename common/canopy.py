@@ -3,23 +3,32 @@ measured (``services/traits``) and to the simulator's plants (``services/sim``),
 trait and its truth differ only by what the scanner saw.
 
 Every trait is computed from points given as field-frame x, y and height above the
-ground h (metres), cut to one plot's footprint ``[xmin, ymin, xmax, ymax]``. The
-footprint is cut into square cells of ``cell`` metres (aligned with its lower-left
-corner); a point with ``h >= min_height`` is canopy, lower ones are ground.
+ground h (metres), cut to one plot's footprint ``[xmin, ymin, xmax, ymax]``. A point
+with ``h >= min_height`` is canopy, lower ones are ground. The plot's long side is
+its planted row, cut along into *slices* ``cell`` metres long; the footprint is cut
+into square ``cell`` cells for the canopy height model.
 
 - the *canopy height model* (CHM): in every cell holding canopy, the highest canopy
-  point's h (the usual LiDAR CHM, e.g. Jimenez-Berni et al. 2018, Front. Plant Sci.
-  9:237);
-- ``height``: the ``height_percentile`` (95th) of the CHM over canopy cells, with
+  point's h (Jimenez-Berni et al. 2018, Front. Plant Sci. 9:237);
+- ``height``: the ``height_percentile`` (99th) of the CHM over canopy cells, with
   ``height_p50`` and ``height_max`` beside it;
-- ``cover``: canopy cells over all cells of the footprint (projected cover, 0-1);
-- ``volume_columns``: the volume under the CHM (sum of cell area x CHM height; the
-  "canopy volume" of Sun et al. 2018);
-- ``volume_voxel``: occupied ``voxel``-metre cubes of canopy (heights counted from the
-  ground, so voxels follow the terrain) times the voxel volume;
+- ``cover``: projected cover, the area of the convex hull of the canopy points in
+  plan view over the footprint's area (0-1; PlantCV's convex-hull area, on the
+  ground plane);
+- ``volume_voxel``: occupied ``voxel``-metre cubes of canopy (heights counted from
+  the ground, so voxels follow the terrain) times the cube's volume;
 - ``volume_hull``: the convex hull of the canopy points (x, y, h);
-- ``points``: points in the footprint; ``seen``: cells holding any point (ground or
-  canopy) over all cells, the share of the plot's surface the survey saw.
+- ``points``: points in the footprint; ``seen``: the share of the slices holding a
+  point (canopy or ground) in the outer third of the footprint on *both* sides of the
+  row, i.e. seen from both lanes; the traits step flags a plot seen too little.
+
+A ground scanner in the lanes sees a row crop from its sides, often at a grazing
+angle, rarely from above (the FARO stands 1 m high beside canopies up to 1.9 m): the
+hulls need only the canopy's outermost points, so they measure the plant; voxel
+occupancy counts the surfaces the scanner saw and falls short where a plot was seen
+from one lane or from afar (docs/traits.md). Hulls are taken of points as given:
+the simulator's truth gives each foliage voxel's faces, the scanner the surfaces it
+hit.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 
 F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
 
 # trait name -> unit, in the order the field book's columns list them
 TRAITS: dict[str, str] = {
@@ -39,7 +49,6 @@ TRAITS: dict[str, str] = {
     "height_p50": "m",
     "height_max": "m",
     "cover": "1",
-    "volume_columns": "m3",
     "volume_voxel": "m3",
     "volume_hull": "m3",
     "points": "1",
@@ -52,9 +61,9 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
     """The definitions' parameters (metres; a percentile in 0-100)."""
 
     cell: Cell = 0.05
-    voxel: Cell = 0.05
+    voxel: Cell = 0.1
     min_height: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.05
-    height_percentile: Annotated[float, msgspec.Meta(ge=50.0, le=100.0)] = 95.0
+    height_percentile: Annotated[float, msgspec.Meta(ge=50.0, le=100.0)] = 99.0
 
     def method(self, trait: str) -> str:
         """How ``trait`` is computed, in words (the long-format CSV's ``method``)."""
@@ -64,12 +73,11 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
             f"({c:g} cm cells, canopy >= {m:g} cm above ground)",
             "height_p50": f"p50 of the canopy height model ({c:g} cm cells)",
             "height_max": f"max of the canopy height model ({c:g} cm cells)",
-            "cover": f"canopy cells / footprint cells ({c:g} cm cells, canopy >= {m:g} cm)",
-            "volume_columns": f"volume under the canopy height model ({c:g} cm cells)",
+            "cover": "convex hull of the canopy in plan view, over the plot area",
             "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following",
             "volume_hull": "convex hull of the canopy points",
             "points": "points inside the plot footprint",
-            "seen": f"footprint cells holding any point ({c:g} cm cells)",
+            "seen": f"{c:g} cm slices with points on both sides of the row",
         }[trait]
 
 
@@ -88,41 +96,46 @@ def plot_traits(xy: F64, h: F64, box: F64, d: CanopyDefinition) -> dict[str, flo
     nx, ny = footprint_cells(box, d.cell)
     ix = np.clip(((xy[:, 0] - box[0]) / d.cell).astype(np.int64), 0, nx - 1)
     iy = np.clip(((xy[:, 1] - box[1]) / d.cell).astype(np.int64), 0, ny - 1)
-    flat = ix * ny + iy
-    seen = np.unique(flat).size / (nx * ny) if len(flat) else 0.0
+    # the row runs along the footprint's long side
+    rows_x = (box[2] - box[0]) >= (box[3] - box[1])
+    along, ns = (ix, nx) if rows_x else (iy, ny)
+    across = xy[:, 1] if rows_x else xy[:, 0]
+    lo_c, hi_c = (box[1], box[3]) if rows_x else (box[0], box[2])
+    width, length = hi_c - lo_c, (box[3] - box[1] if not rows_x else box[2] - box[0])
+    near = np.bincount(along[across < lo_c + width / 3], minlength=ns) > 0
+    far = np.bincount(along[across > hi_c - width / 3], minlength=ns) > 0
+    out = {"points": float(len(h)), "seen": float((near & far).mean())}
     canopy = h >= d.min_height
-    out = {"points": float(len(h)), "seen": float(seen)}
-    nan = float("nan")
     if not canopy.any():
-        return {**out, "cover": 0.0, **dict.fromkeys(_SHAPE, nan)}
+        return {**out, "cover": 0.0, **dict.fromkeys(_SHAPE, math.nan)}
+    flat = (ix * ny + iy)[canopy]
     chm = np.full(nx * ny, -np.inf)
-    np.maximum.at(chm, flat[canopy], h[canopy])
+    np.maximum.at(chm, flat, h[canopy])
     tops = chm[np.isfinite(chm)]
-    out["cover"] = float(tops.size / (nx * ny))
     out["height"] = float(np.percentile(tops, d.height_percentile))
     out["height_p50"] = float(np.percentile(tops, 50.0))
     out["height_max"] = float(tops.max())
-    out["volume_columns"] = float(tops.sum() * d.cell**2)
+    out["cover"] = float(min(1.0, _hull_volume(xy[canopy], 2) / (width * length)))
     # one int64 key per voxel: a 1-D unique is far faster than unique rows
     vz = np.floor(h[canopy] / d.voxel).astype(np.int64)
     vx = np.floor((xy[canopy, 0] - box[0]) / d.voxel).astype(np.int64)
     vy = np.floor((xy[canopy, 1] - box[1]) / d.voxel).astype(np.int64)
-    span = 1 << 20  # voxels per axis: 52 km at 5 cm, offsets keep keys non-negative
+    span = 1 << 20  # voxels per axis (105 km at 10 cm); offsets keep keys non-negative
     keys = ((vx + span // 2) * span + (vy + span // 2)) * span + vz
     out["volume_voxel"] = float(np.unique(keys).size * d.voxel**3)
-    out["volume_hull"] = _hull_volume(np.column_stack([xy[canopy], h[canopy]]))
+    out["volume_hull"] = _hull_volume(np.column_stack([xy[canopy], h[canopy]]), 3)
     return out
 
 
-_SHAPE = ("height", "height_p50", "height_max", "volume_columns", "volume_voxel", "volume_hull")
+_SHAPE = ("height", "height_p50", "height_max", "volume_voxel", "volume_hull")
 
 
-def _hull_volume(pts: F64) -> float:
-    """Volume of the convex hull of ``pts`` (N, 3); 0 for fewer than four points or a
-    flat set, which has no volume."""
+def _hull_volume(pts: F64, dim: int) -> float:
+    """Volume (area for ``dim`` 2) of the convex hull of ``pts`` (N, dim); 0 for too few
+    points or a flat set, which has none."""
     from scipy.spatial import ConvexHull, QhullError
 
-    if len(pts) < 4:
+    if len(pts) < dim + 1:
         return 0.0
     try:
         return float(ConvexHull(pts).volume)

@@ -38,6 +38,7 @@ BENCHMARKS = {
     "bench_nav": "Navigation: the paper's experiments in the simulator",
     "bench_profiles": "The paper's method against ours, same simulated world, several seeds",
     "bench_registration": "Registration: the simulated ENGR survey",
+    "bench_traits": "Traits: a simulated breeding trial",
     "bench_planner": "Planning: visibility, cover and tour",
     "bench_devices": "Devices: GNSS compass and simulated FARO scans",
     "bench_survey": "Whole surveys: `make sim` and `make hil` (every device on its wire)",

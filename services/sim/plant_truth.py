@@ -1,9 +1,10 @@
 """The true canopy traits of every plot, computed from the simulated plants themselves
 (never from scan points), for the evaluation to score measured traits against.
 
-Each plot's traits are :func:`common.canopy.plot_traits` of the centres of all its
-occupied foliage voxels (heights above the true terrain), cut to the plot box's
-footprint: leaves of plants leaning out of the box are outside the plot, as they are
+Each plot's traits are :func:`common.canopy.plot_traits` of all its occupied foliage
+voxels, each given by the centres of its four side faces (the plant's true extent:
+a ray stops at a voxel's face; heights above the true terrain), cut to the plot
+box's footprint: leaves of plants leaning out of the box are outside the plot, as they are
 for the measured traits. The survey-side traits ``points`` and ``seen`` say what a
 scanner saw and mean nothing here, so they are left out. Beside them: who the plot is
 (index, id, row, column, entry, rep), what its plants were built from (the trial's
@@ -59,10 +60,11 @@ def plant_truth(
     for p, rec in enumerate(recs):
         box = field.plot_boxes[p]
         pts, _ = foliage.occupied_points(p)
-        h = pts[:, 2] - terrain.height(pts[:, 0], pts[:, 1])
-        inside = (pts[:, 0] >= box[0]) & (pts[:, 0] < box[3])
-        inside &= (pts[:, 1] >= box[1]) & (pts[:, 1] < box[4])
-        traits = plot_traits(pts[inside, :2], h[inside], box[[0, 1, 3, 4]], d)
+        faces = _side_faces(pts, foliage.voxel)
+        h = faces[:, 2] - terrain.height(faces[:, 0], faces[:, 1])
+        inside = (faces[:, 0] >= box[0]) & (faces[:, 0] < box[3])
+        inside &= (faces[:, 1] >= box[1]) & (faces[:, 1] < box[4])
+        traits = plot_traits(faces[inside, :2], h[inside], box[[0, 1, 3, 4]], d)
         row: dict[str, Any] = {
             "plot": p,
             "plot_id": rec.plot,
@@ -77,6 +79,14 @@ def plant_truth(
         row |= _extent(pts, foliage.voxel)
         rows.append(row)
     return rows
+
+
+def _side_faces(centres: F64, voxel: float) -> F64:
+    """The centres of each voxel's four side faces: the plant's true horizontal extent
+    (a ray stops at a voxel's face), at the voxel's mid-height."""
+    half = voxel / 2
+    steps = np.array([[half, 0, 0], [-half, 0, 0], [0, half, 0], [0, -half, 0]])
+    return (centres[:, None, :] + steps[None, :, :]).reshape(-1, 3)
 
 
 def _planned(pp: PlotPlan | None) -> dict[str, Any]:

@@ -3,9 +3,10 @@ point's height above it, the cloud cut by every plot footprint at once, and
 :func:`common.canopy.plot_traits` on each plot's points (the one definition of the
 traits, shared with the simulator's truth).
 
-A plot's quality: ``ok``; ``occluded`` when the share of its footprint cells holding
-a point (``seen``) is below ``min_seen``, so its traits describe only what the
-scanner saw; ``no points`` when the survey saw nothing of it (its traits are NaN).
+A plot's quality: ``ok``; ``occluded`` when the share of its length the survey saw
+from both lanes (``seen``, :mod:`common.canopy`) is below ``min_seen``: a side not
+seen leaves the canopy's far extent out of its cover and volume; ``no points`` when
+the survey saw nothing of it (its traits are NaN).
 :func:`compute_run` is the one entry point for a run folder, reused by the
 multi-date (season) step.
 """

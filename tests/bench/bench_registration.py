@@ -74,8 +74,18 @@ def simulate(
     pr = plan(layout, field=field)
     xy = [field.cand_xy[field.candidate_index(c)] for c in pr.selected]
     print(f"plan: {len(xy)} scan locations in {time.perf_counter() - t:.1f} s")
-    rng = np.random.default_rng(seed)
-    settings = ScanSettings(step_deg=step_deg)
+    return survey(world, xy, tmp, ScanSettings(step_deg=step_deg), np.random.default_rng(seed))
+
+
+def survey(
+    world: World,
+    xy: list[npt.NDArray[np.float64]],
+    tmp: Path,
+    settings: ScanSettings,
+    rng: np.random.Generator,
+) -> tuple[list[ScanInput], list[npt.NDArray[np.float64]]]:
+    """A FARO scan from the robot settled at each of ``xy`` (yaw 0), written to E57 in
+    ``tmp``, with a navigation pose drawn under :data:`NAV_SIGMA`; and the true poses."""
     inputs, truth = [], []
     t = time.perf_counter()
     for k, (x, y) in enumerate(xy):
@@ -103,7 +113,8 @@ def simulate(
         )
         inputs.append(ScanInput(path=path, nav_pose=nav, name=path.stem))
         truth.append(true)
-    print(f"rendered {len(inputs)} scans at {step_deg} deg in {time.perf_counter() - t:.1f} s")
+    took = time.perf_counter() - t
+    print(f"rendered {len(inputs)} scans at {settings.step_deg} deg in {took:.1f} s")
     return inputs, truth
 
 

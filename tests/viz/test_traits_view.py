@@ -91,7 +91,7 @@ def test_flagged_and_unmeasured_plots_are_grey_with_their_quality(tiny: Field) -
 
 
 def test_labels_give_each_trait_in_its_unit_and_leave_out_what_is_empty(tiny: Field) -> None:
-    text = csv_text("7,2,3,,,1.1,1,1.2,0.8,0.3,0.2,0.25,12345,0.9,ok,")
+    text = csv_text("7,2,3,,,1.1,1,1.2,0.8,0.2,0.25,12345,0.9,ok,")
     (row,) = tv.parse(text, "t.csv")
     assert tv.label(row, "volume_hull") == "plot 7: volume_hull 0.25 m3"
     assert tv.label(row, "points") == "plot 7: points 12345"

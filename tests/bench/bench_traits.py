@@ -1,0 +1,224 @@
+"""Traits benchmark: ``python tests/bench/bench_traits.py [--json out.json]``.
+
+The example trial (``common/fields/trial.toml``: ENGR's 60 plots, 20 entries x 3
+reps) grown by the simulator (:mod:`services.sim.trial`) and surveyed as the
+registration benchmark does it (:func:`bench_registration.survey`: the planner's
+locations on the nominal boxes, a FARO scan at 0.36 deg from each, navigation poses
+drawn under its error model, then registration: nav + C2C with the spheres). Then the
+traits (:mod:`services.traits`) of the registered cloud, merged at 1 cm as
+``registered.laz`` is, scored against the same definitions applied to the simulator's
+plants (:func:`services.sim.plant_truth.plant_truth`):
+
+- per seed (three) and two dates (70 and 91 days after planting): canopy height
+  RMSE and bias, cover and voxel volume errors, growth in height between the dates,
+  heritability of height measured against the same statistic on the true heights;
+- ``phenorover traits`` wall time on one survey (a run folder, the command as a
+  user runs it) and on a season of five dates (one seed).
+
+Figures are reported, never asserted; an experiment that fails makes it exit 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import logging
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
+
+from common import fieldbook
+from common.field import load_field
+from common.messages.plan import PlanResult
+from common.pointcloud import voxel_merge, write_laz
+from phenorover.eval import traits as ev
+from phenorover.eval.registration import NAV_SIGMA
+from phenorover.eval.results import Bench
+from services.mission.log import MissionLog
+from services.planner.core import plan
+from services.register.pipeline import register
+from services.sim.plant_truth import plant_truth
+from services.sim.render import ScanSettings
+from services.sim.trial import TrialConfig
+from services.sim.world import World, WorldConfig
+from services.traits.compute import RunTraits, compute_traits
+from services.traits.config import TraitsConfig
+from services.traits.run import RunInput
+from services.traits.series import season
+from services.traits.stats import heritability
+from tests.bench.bench_registration import config as register_config
+from tests.bench.bench_registration import survey
+
+SEEDS = (1, 2, 3)
+PLANTED = datetime.date(2026, 5, 1)  # the trial's planting_date
+DATES = (datetime.date(2026, 7, 10), datetime.date(2026, 7, 31))  # 70 and 91 days
+SEASON = (datetime.date(2026, 6, 20), datetime.date(2026, 7, 1), datetime.date(2026, 7, 20))
+
+
+def simulate(
+    seed: int, date: datetime.date, xy: list[Any], pr: PlanResult, runs: Path, step: float
+) -> tuple[RunTraits, list[dict[str, Any]], float]:
+    """One survey of the trial on ``date``: its measured traits, the plants' truth and
+    the registration's time; the run folder (``mission.db``, ``registered.laz``) is
+    left in ``runs`` for the command-line timings."""
+    layout, field = load_field("trial")
+    world = World(layout, field, WorldConfig(seed=seed, trial=TrialConfig(date=date)))
+    truth = plant_truth(layout, field, world.terrain, world.foliage, world.trial)
+    run = runs / f"trial-s{seed}-{date.isoformat()}"
+    run.mkdir(parents=True)
+    rng = np.random.default_rng([seed, date.toordinal()])
+    inputs, _ = survey(world, xy, run, ScanSettings(step_deg=step), rng)
+    t = time.perf_counter()
+    reg = register(inputs, register_config())
+    reg_s = time.perf_counter() - t
+    write_laz(run / "registered.laz", reg.scans, 0.01)
+    # as a simulated mission's folder holds it: the simulator's clock has no calendar,
+    # so the traits take the survey's date from the manifest's trial
+    (run / "manifest.toml").write_text(
+        f'machine = "bench"\n[services.sim.world.trial]\ndate = {date.isoformat()}\n'
+    )
+    log = MissionLog(run / "mission.db")
+    log.create(run.name, pr.field, 0, msgspec.json.encode(pr).decode(), [])
+    log.set_state("done")
+    log.close()
+    pts, _, _ = voxel_merge(reg.scans, 0.01)
+    inp = RunInput(
+        run_dir=run,
+        mission={"id": run.name},
+        layout=layout,
+        field=field,
+        records=fieldbook.records(layout, field),
+        date=date.isoformat(),
+        date_source="the benchmark",
+        cloud=pts,
+    )
+    return compute_traits(inp, TraitsConfig()), truth, reg_s
+
+
+def _cli_time(runs: list[Path]) -> float:
+    """Wall seconds of ``python -m services.traits RUNS...`` as a user runs it."""
+    cmd = [sys.executable, "-m", "services.traits", *map(str, runs)]
+    t = time.perf_counter()
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    took = time.perf_counter() - t
+    if r.returncode != 0:
+        raise RuntimeError(f"phenorover traits exited {r.returncode}: {r.stderr.strip()[-300:]}")
+    return took
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", type=Path, help="write the figures as JSON here")
+    ap.add_argument("--step", type=float, default=0.36, help="scan step (deg)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
+    ap.add_argument("--no-timings", action="store_true", help="skip the command's timings")
+    ap.add_argument("-v", "--verbose", action="store_true")
+    args = ap.parse_args()
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
+    bench = Bench("bench_traits", ev.error_models(args.step, NAV_SIGMA, TrialConfig()))
+    layout, field = load_field("trial")
+    pr = plan(layout, field=field)
+    xy = [field.cand_xy[field.candidate_index(c)] for c in pr.selected]
+    print(f"plan: {len(xy)} scan locations on the nominal boxes")
+    by_seed: list[ev.SeedScore] = []
+    out: dict[str, Any] = {"seeds": args.seeds, "dates": [d.isoformat() for d in DATES]}
+    with tempfile.TemporaryDirectory() as d:
+        runs = Path(d)
+        season_runs: list[Path] = []
+        for seed in args.seeds:
+            try:
+                dates = []
+                for date in DATES:
+                    rt, truth, reg_s = simulate(seed, date, xy, pr, runs, args.step)
+                    dates.append((rt, truth))
+                    print(f"seed {seed} {date}: registered in {reg_s:.1f} s")
+                # growth as the product's season step measures it (dates checked
+                # against each other on stable ground, one ground for both)
+                s = season([rt.run_dir for rt, _ in dates], TraitsConfig())
+                grew = np.nansum(s.growth, axis=0)
+                grew[np.isnan(s.growth).any(axis=0)] = np.nan
+                off = s.offsets[-1]
+                out.setdefault("offsets_mm", []).append(None if off is None else off.median_m * 1e3)
+                score = ev.score_seed(seed, dates, heritability, grew)
+            except Exception as exc:
+                bench.fail(f"seed {seed}", f"{type(exc).__name__}: {exc}")
+                continue
+            by_seed.append(score)
+            print(ev.describe(score))
+            if not season_runs:
+                season_runs = [rt.run_dir for rt, _ in dates]
+                _plan_experiment(bench, seed, dates[-1][0], pr, out)
+        ev.record_scores(bench, by_seed)
+        if not args.no_timings:
+            _timings(bench, args, season_runs, xy, pr, runs, out)
+    out["scores"] = [msgspec.to_builtins(s) for s in by_seed]
+    return bench.finish(args.json, out)
+
+
+def _plan_experiment(
+    bench: Bench, seed: int, rt: RunTraits, pr: PlanResult, out: dict[str, Any]
+) -> None:
+    """The next survey planned on the crop as this one measured it, against the plan
+    on the nominal boxes: the true foliage cells each plan's scans see (0.5 deg)."""
+    from phenorover.eval.plan_survey import compare_plans, locations
+    from services.planner.measured import plan_measured
+
+    try:
+        assert rt.crop is not None
+        layout, field = load_field("trial")
+        world = World(
+            layout,
+            field,
+            WorldConfig(seed=seed, trial=TrialConfig(date=datetime.date.fromisoformat(rt.date))),
+        )
+        mp = plan_measured(layout, field, rt.crop)
+        cmp = compare_plans(world, locations(pr), locations(mp))
+    except Exception as exc:
+        bench.fail("plan from the survey", f"{type(exc).__name__}: {exc}")
+        ev.record_plan(bench, None, None, None, str(exc))
+        return
+    cmp["tour_m"] = {"nominal": pr.tour.length, "measured": mp.tour.length}
+    out["plan_from_survey"] = cmp
+    print("plan from the survey:", cmp)
+    ev.record_plan(bench, cmp, pr, mp)
+
+
+def _timings(
+    bench: Bench,
+    args: argparse.Namespace,
+    season_runs: list[Path],
+    xy: list[Any],
+    pr: PlanResult,
+    runs: Path,
+    out: dict[str, Any],
+) -> None:
+    """``phenorover traits`` on one survey and on five dates of one seed."""
+    if not season_runs:
+        ev.record_times(bench, None, None, "no survey was simulated")
+        return
+    try:
+        one = _cli_time(season_runs[-1:])
+        for date in SEASON:
+            rt, _, _ = simulate(args.seeds[0], date, xy, pr, runs, args.step)
+            season_runs.append(rt.run_dir)
+        five = _cli_time(season_runs)
+    except Exception as exc:
+        bench.fail("timings", f"{type(exc).__name__}: {exc}")
+        ev.record_times(bench, None, None, str(exc))
+        return
+    out["cli_s"] = {"one": one, "five": five}
+    ev.record_times(bench, one, five)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
