@@ -58,9 +58,15 @@ class RegistrationJob:
     steps' ``[services.register]`` and ``[services.traits]`` options; None: defaults."""
 
     def __init__(
-        self, run_dir: Path, report: Report, manifest: Path | None = None, traits: bool = False
+        self,
+        run_dir: Path,
+        report: Report,
+        manifest: Path | None = None,
+        traits: bool = False,
+        modules: tuple[str, str] = (REGISTER_MODULE, TRAITS_MODULE),
     ) -> None:
         self.run_dir = run_dir
+        self.modules = modules  # (registration, traits), run with ``python -m``
         self.report = report
         self.manifest = manifest
         self.traits = traits
@@ -81,7 +87,7 @@ class RegistrationJob:
 
     def start(self) -> None:
         """Start the registration; raises OSError when it cannot be started."""
-        self._spawn(REGISTER_MODULE, self.log_path)
+        self._spawn(self.modules[0], self.log_path)
         threading.Thread(target=self._watch, daemon=True, name="register-watch").start()
 
     def _spawn(self, module: str, log_path: Path) -> None:
@@ -117,7 +123,7 @@ class RegistrationJob:
         if not self.traits:
             return
         try:
-            self._spawn(TRAITS_MODULE, self.traits_log)
+            self._spawn(self.modules[1], self.traits_log)
         except OSError as exc:
             self.report("error", f"traits not started: {exc}")
             return

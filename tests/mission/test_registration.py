@@ -1,13 +1,17 @@
 """The end-of-mission registration child process: its failure is reported as one
 mission event naming the cause, the mission log is left as it was, and the child
-reads its options from the manifest the mission service was started with."""
+reads its options from the manifest the mission service was started with. The
+traits follow a registration that succeeded, in a child process of their own."""
 
 from __future__ import annotations
 
 import threading
 from pathlib import Path
 
-from services.mission.registration import RegistrationJob
+import pytest
+
+from common.messages.mission import COMPUTING_TRAITS
+from services.mission.registration import TRAITS_MODULE, RegistrationJob
 
 
 def _run(job: RegistrationJob) -> list[tuple[str, str]]:
@@ -51,3 +55,29 @@ def test_stop_ends_a_running_registration_without_a_report(tmp_path: Path) -> No
     job.start()
     job.stop(timeout=5.0)
     assert not job.running and got == []
+
+
+def test_traits_follow_a_registration_that_succeeded_and_their_failure_is_reported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a registration that succeeds without scans: a module of our own on the path
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "fake_register.py").write_text("print('registered')\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path / "lib"))
+    run = tmp_path / "run"
+    run.mkdir()
+    got: list[tuple[str, str]] = []
+    ended = threading.Event()
+
+    def report(level: str, text: str) -> None:
+        got.append((level, text))
+        if text.startswith("traits "):
+            ended.set()
+
+    job = RegistrationJob(run, report, traits=True, modules=("fake_register", TRAITS_MODULE))
+    job.start()
+    assert ended.wait(60), got
+    assert [lv for lv, _ in got] == ["info", "info", "error"]
+    assert got[0][1].startswith("registration done") and got[1][1] == COMPUTING_TRAITS
+    assert got[2][1].startswith("traits failed (exit 2): ") and "mission.db" in got[2][1]
+    assert (run / "traits.log").is_file()
