@@ -16,7 +16,6 @@ numbering that reproduces the paper's ENGR route (``7r + c + 1`` there).
 from __future__ import annotations
 
 import logging
-import stat
 from pathlib import Path
 
 import msgspec
@@ -30,12 +29,12 @@ from common.field_model import (
     FIELDS_DIR,
     MAX_CELLS,
     MAX_EXTENT_M,
-    MAX_FILE_BYTES,
     MAX_PLOTS,
     Field,
     FieldError,
     FieldLayout,
     ScannerModel,
+    read_bounded,
 )
 
 __all__ = [
@@ -267,19 +266,7 @@ def load_field(source: str | Path) -> tuple[FieldLayout, Field]:
     Raises FieldError with one line naming the file and the problem.
     """
     path = field_path(source)
-    try:
-        # a regular file of sane size: a FIFO or /dev/zero would never end
-        st = path.stat()
-        if not stat.S_ISREG(st.st_mode):
-            raise FieldError(f"{path}: not a regular file")
-        if st.st_size > MAX_FILE_BYTES:
-            raise FieldError(
-                f"{path}: {st.st_size:,} bytes, more than the {MAX_FILE_BYTES:,} a field file "
-                "may have"
-            )
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FieldError(f"{path}: cannot read: {exc.strerror}") from None
+    data = read_bounded(path, "a field file")
     if path.suffix in (".geojson", ".json"):
         from common.field_geojson import field_from_geojson
 

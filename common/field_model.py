@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import stat
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -190,3 +191,20 @@ class Field:
         if hit.size == 0:
             raise ValueError(f"candidate id {cand_id} is not in field {self.name!r}")
         return int(hit[0])
+
+
+def read_bounded(path: Path, what: str) -> bytes:
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO or
+    /dev/zero would never end); FieldError naming ``path`` and, for a file too large,
+    ``what`` it is (``a field file``)."""
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            raise FieldError(f"{path}: not a regular file")
+        if st.st_size > MAX_FILE_BYTES:
+            raise FieldError(
+                f"{path}: {st.st_size:,} bytes, more than the {MAX_FILE_BYTES:,} {what} may have"
+            )
+        return path.read_bytes()
+    except OSError as exc:
+        raise FieldError(f"{path}: cannot read: {exc.strerror}") from None

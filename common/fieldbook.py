@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import csv
 import io
-import stat
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -20,12 +19,12 @@ import numpy as np
 import numpy.typing as npt
 
 from common.field_model import (
-    MAX_FILE_BYTES,
     MAX_PLOTS,
     Field,
     FieldError,
     FieldLayout,
     PlotRecord,
+    read_bounded,
 )
 
 __all__ = [
@@ -58,20 +57,11 @@ def _one_line(exc: Exception) -> str:
 
 
 def _read_text(path: Path) -> str:
-    """The text of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO or
-    /dev/zero would never end); a spreadsheet's UTF-8 byte-order mark is dropped."""
+    """The text of a field book file (:func:`read_bounded`); a spreadsheet's UTF-8
+    byte-order mark is dropped."""
+    data = read_bounded(path, "a field book")
     try:
-        st = path.stat()
-        if not stat.S_ISREG(st.st_mode):
-            raise FieldError(f"{path}: not a regular file")
-        if st.st_size > MAX_FILE_BYTES:
-            raise FieldError(
-                f"{path}: {st.st_size:,} bytes, more than the {MAX_FILE_BYTES:,} a field "
-                "book may have"
-            )
-        return path.read_bytes().decode("utf-8-sig")
-    except OSError as exc:
-        raise FieldError(f"{path}: cannot read: {exc.strerror}") from None
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise FieldError(f"{path}: not UTF-8 text (byte {exc.start})") from None
 

@@ -158,3 +158,17 @@ def read_log(path: str | Path) -> LogData:
         ) from None
     finally:
         con.close()
+
+
+def read_run(run_dir: str | Path) -> tuple[Path, LogData, dict[str, Any]]:
+    """A run folder's mission log (``RUN_DIR/mission.db``, read-only): its path, its
+    data and its mission row. Raises MissionLogError, one line: not a run folder, an
+    unreadable log, an empty mission table."""
+    run = Path(run_dir)
+    db = run / "mission.db"
+    if not db.is_file():
+        raise MissionLogError(f"{db}: no mission log here (is {run} a run folder?)")
+    data = read_log(db)
+    if data.mission is None:
+        raise MissionLogError(f"{db}: the mission table is empty")
+    return db, data, dict(data.mission)

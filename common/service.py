@@ -113,6 +113,28 @@ def _parser(name: str) -> argparse.ArgumentParser:
     return p
 
 
+def add_job_arguments(p: argparse.ArgumentParser, name: str, figures: str) -> None:
+    """The flags by which a job (``[services.<name>]``, run on demand) takes its
+    options: ``--manifest``, ``--config``, ``--set`` (read by :func:`resolve_config`)
+    and ``--figures/--no-figures`` (``figures`` says what it writes)."""
+    p.add_argument(
+        "--manifest", type=Path, default=None, help=f"deploy manifest; uses [services.{name}]"
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help=f"a TOML file holding just the [services.{name}] section (replaces the manifest's)",
+    )
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override")
+    p.add_argument(
+        "--figures",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help=f"write {figures} (default: yes)",
+    )
+
+
 def resolve_config(
     name: str, config_type: type[C], args: argparse.Namespace
 ) -> tuple[C, Manifest | None]:

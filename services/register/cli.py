@@ -26,17 +26,16 @@ import argparse
 import json
 import logging
 import math
-import os
 import signal
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import msgspec
 
 from common.config import dump_toml
+from common.files import atomic_write
 from common.robot import RUN_COPY, load_robot
 from services.register.config import RegisterRunConfig, add_config_arguments, resolve
 from services.register.pipeline import Registration, register
@@ -66,17 +65,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _atomic(path: Path, write: Callable[[Path], object]) -> None:
-    """``write(tmp)`` then rename onto ``path``; the temporary keeps the suffix (pye57
-    and laspy pick the format by it)."""
-    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: Path) -> None:
     """The E57, the LAZ files, the report and its figures (see the module docstring)."""
     from common.pointcloud import write_e57, write_laz
@@ -85,11 +73,11 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
     out.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Any] = {}
     t = time.perf_counter()
-    _atomic(out / "registered.e57", lambda p: write_e57(p, reg.scans))
+    atomic_write(out / "registered.e57", lambda p: write_e57(p, reg.scans))
     outputs["e57"] = "registered.e57"
     log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
     counts: dict[str, int] = {}
-    _atomic(
+    atomic_write(
         out / "registered.laz",
         lambda p: counts.update(field=write_laz(p, reg.scans, cfg.laz_voxel)),
     )
@@ -100,7 +88,7 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
 
         frame = field_frame(layout)
         epsg = frame.utm.to_epsg()
-        _atomic(
+        atomic_write(
             out / "utm.laz",
             lambda p: counts.update(
                 utm=write_laz(p, reg.scans, cfg.laz_voxel, frame.field_to_utm, epsg)
@@ -121,7 +109,7 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
             if name:
                 figs.append(name)
         log.info("wrote figures: %s", ", ".join(figs))
-    _atomic(out / "register.toml", lambda p: p.write_text(dump_toml(cfg)))
+    atomic_write(out / "register.toml", lambda p: p.write_text(dump_toml(cfg)))
     outputs["config"] = "register.toml"
     write_report(run, reg, out, outputs, figs)
 
@@ -143,8 +131,8 @@ def write_report(
     """``report.json`` and ``report.md`` from the mission log and the registration."""
     rep = build_report(run, None if reg is None else reg.report, outputs)
     text = json.dumps(_finite(rep), indent=1, allow_nan=False)
-    _atomic(out / "report.json", lambda p: p.write_text(text))
-    _atomic(out / "report.md", lambda p: p.write_text(markdown(rep, figs)))
+    atomic_write(out / "report.json", lambda p: p.write_text(text))
+    atomic_write(out / "report.md", lambda p: p.write_text(markdown(rep, figs)))
     return rep
 
 

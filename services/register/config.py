@@ -14,7 +14,6 @@ validated like a service's.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Annotated
 
 import msgspec
@@ -38,23 +37,10 @@ class RegisterRunConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknow
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that choose the options (see the module docstring)."""
-    p.add_argument(
-        "--manifest", type=Path, default=None, help="deploy manifest; uses [services.register]"
-    )
-    p.add_argument(
-        "--config",
-        type=Path,
-        default=None,
-        help="a TOML file holding just the [services.register] section (replaces the manifest's)",
-    )
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override")
+    from common.service import add_job_arguments
+
+    add_job_arguments(p, NAME, "the PNG figures")
     p.add_argument("--laz-voxel", type=float, default=None, metavar="M", help="default 0.01")
-    p.add_argument(
-        "--figures",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="write the PNG figures (default: yes)",
-    )
 
 
 def resolve(args: argparse.Namespace) -> tuple[RegisterRunConfig, Manifest | None]:

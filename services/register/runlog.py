@@ -23,7 +23,7 @@ import msgspec
 
 from common.geo import rot_zyx
 from common.messages.plan import PlanResult
-from common.missionlog import MissionLogError, Step, read_log
+from common.missionlog import MissionLogError, Step, read_run
 from common.poses import F64, PoseError, scanner_pose
 from common.robot import Robot
 from services.register.pipeline import ScanInput
@@ -78,15 +78,11 @@ class RunData:
 def load_run(run_dir: str | Path) -> RunData:
     """Read ``run_dir/mission.db`` read-only; raises RunError."""
     run = Path(run_dir)
-    db = run / "mission.db"
-    if not db.is_file():
-        raise RunError(f"{db}: no mission log here (is {run} a run folder?)")
     try:
-        data = read_log(db)
+        db, data, _ = read_run(run)
     except MissionLogError as exc:
         raise RunError(str(exc)) from None
-    if data.mission is None:
-        raise RunError(f"{db}: the mission table is empty")
+    assert data.mission is not None  # read_run refuses an empty mission table
     mission, steps, events = dict(data.mission), data.steps, data.events
     plan = None
     text = mission.pop("plan_json")

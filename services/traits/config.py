@@ -13,7 +13,6 @@ and ``--figures``/``--no-figures``. What each trait is stays
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Annotated
 
 import msgspec
@@ -81,22 +80,9 @@ class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that choose the options (see the module docstring)."""
-    p.add_argument(
-        "--manifest", type=Path, default=None, help="deploy manifest; uses [services.traits]"
-    )
-    p.add_argument(
-        "--config",
-        type=Path,
-        default=None,
-        help="a TOML file holding just the [services.traits] section (replaces the manifest's)",
-    )
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override")
-    p.add_argument(
-        "--figures",
-        action=argparse.BooleanOptionalAction,
-        default=None,
-        help="write fieldmap.png (default: yes)",
-    )
+    from common.service import add_job_arguments
+
+    add_job_arguments(p, NAME, "fieldmap.png")
 
 
 def resolve(args: argparse.Namespace) -> tuple[TraitsConfig, Manifest | None]:

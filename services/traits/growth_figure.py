@@ -6,7 +6,6 @@ no display), written atomically so a reader never finds half a PNG.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from common.canopy import F64
+from common.files import atomic_write
 
 DPI = 150
 # above this many entries a legend hides the plot; the title gives the count instead
@@ -72,7 +72,8 @@ def growth_figure(
         ax.legend(loc="upper left", fontsize=7, bbox_to_anchor=(1.0, 1.0))
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    _save_atomic(fig, Path(path))
+    dest = Path(path)
+    atomic_write(dest, lambda p: fig.savefig(p, dpi=DPI, format=dest.suffix.lstrip(".") or "png"))
 
 
 def _colours(n: int) -> list[tuple[float, float, float, float]]:
@@ -81,14 +82,3 @@ def _colours(n: int) -> list[tuple[float, float, float, float]]:
     k = 20 if n > 10 else 10
     m = colormaps[f"tab{k}"]
     return [m(i % k) for i in range(n)]
-
-
-def _save_atomic(fig: Figure, path: Path) -> None:
-    """Save to a hidden temporary beside ``path`` (same file system, so the rename is
-    atomic) then rename it over ``path``."""
-    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
-    try:
-        fig.savefig(tmp, dpi=DPI, format=path.suffix.lstrip(".") or "png")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)

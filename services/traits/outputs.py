@@ -24,7 +24,6 @@ import csv
 import io
 import json
 import math
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ import numpy as np
 
 from common.canopy import TRAITS
 from common.config import dump_toml
+from common.files import atomic_write
 from services.traits.compute import NAMES, RunTraits, TraitTable
 from services.traits.config import TraitsConfig
 from services.traits.run import Record
@@ -41,16 +41,6 @@ BOOK = ("plot", "row", "column", "rep", "entry")
 # decimals per unit: mm for heights, 0.1 L for volumes, 0.001 for shares
 DECIMALS = {"m": 3, "m3": 4, "1": 3}
 COUNTS = ("points",)
-
-
-def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
-    """``write(tmp)`` then rename onto ``path`` (the temporary keeps the suffix)."""
-    tmp = path.with_name(f".{path.stem}.part{path.suffix}")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def _text(text: str) -> Callable[[Path], object]:

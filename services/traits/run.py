@@ -1,5 +1,5 @@
 """A registered survey as the traits job reads it: ``RUN_DIR/mission.db`` (read-only,
-through :func:`common.missionlog.read_log`), the field its plan was made for, the
+through :func:`common.missionlog.read_run`), the field its plan was made for, the
 field book, ``RUN_DIR/registered.laz`` (``phenorover register``'s merged cloud, field
 frame) and the survey's date.
 
@@ -29,7 +29,7 @@ from common.field import Field, FieldError, FieldLayout, build_field, load_field
 from common.field_model import PlotRecord
 from common.fieldbook import records
 from common.messages.plan import PlanResult
-from common.missionlog import MissionLogError, read_log
+from common.missionlog import MissionLogError, read_run
 
 F64 = npt.NDArray[np.float64]
 log = logging.getLogger("phenorover.traits")
@@ -147,16 +147,10 @@ def read_cloud(path: Path) -> F64:
 def load_run(run_dir: str | Path, date: str | None = None) -> RunInput:
     """Read a run folder (see the module docstring); raises RunError."""
     run = Path(run_dir)
-    db = run / "mission.db"
-    if not db.is_file():
-        raise RunError(f"{db}: no mission log here (is {run} a run folder?)")
     try:
-        data = read_log(db)
+        db, _, mission = read_run(run)
     except MissionLogError as exc:
         raise RunError(str(exc)) from None
-    if data.mission is None:
-        raise RunError(f"{db}: the mission table is empty")
-    mission = dict(data.mission)
     text = str(mission.pop("plan_json") or "")
     if not text:
         raise RunError(f"{db}: the mission holds no plan, so no field to cut the cloud by")
