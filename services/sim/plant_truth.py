@@ -2,8 +2,9 @@
 (never from scan points), for the evaluation to score measured traits against.
 
 Each plot's traits are :func:`common.canopy.plot_traits` of all its occupied foliage
-voxels, each given by the centres of its four side faces (the plant's true extent:
-a ray stops at a voxel's face; heights above the true terrain), cut to the plot
+voxels, each given by the centres of its four side faces and its top face (the
+plant's true extent and top: a ray stops at a voxel's face; heights above the true
+terrain), cut to the plot
 box's footprint: leaves of plants leaning out of the box are outside the plot, as they are
 for the measured traits. The survey-side traits ``points`` and ``seen`` say what a
 scanner saw and mean nothing here, so they are left out. Beside them: who the plot is
@@ -82,10 +83,11 @@ def plant_truth(
 
 
 def _side_faces(centres: F64, voxel: float) -> F64:
-    """The centres of each voxel's four side faces: the plant's true horizontal extent
-    (a ray stops at a voxel's face), at the voxel's mid-height."""
+    """The centres of each voxel's four side faces, at its mid-height, and of its top
+    face: the plant's true horizontal extent and its true top (a ray stops at a
+    voxel's face)."""
     half = voxel / 2
-    steps = np.array([[half, 0, 0], [-half, 0, 0], [0, half, 0], [0, -half, 0]])
+    steps = np.array([[half, 0, 0], [-half, 0, 0], [0, half, 0], [0, -half, 0], [0, 0, half]])
     return (centres[:, None, :] + steps[None, :, :]).reshape(-1, 3)
 
 
