@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from common.canopy import TRAITS
-from services.traits.breeding import heritabilities
-from services.traits.compute import NAMES
+from services.traits.compute import NAMES, TraitTable
 from services.traits.outputs import BOOK, _cell, _text, atomic_write, book
 from services.traits.series import Season
+from services.traits.stats import Heritability, heritability
 
 
 def season_csv(s: Season) -> str:
@@ -72,6 +72,14 @@ def fits_csv(s: Season) -> str:
     return buf.getvalue()
 
 
+def _height_h2(t: TraitTable) -> Heritability:
+    """Heritability of height on one date (the other traits' are in each run's
+    heritability.csv)."""
+    ok = np.array([q == "ok" for q in t.quality])
+    values = np.where(ok, t.column("height"), np.nan)
+    return heritability([r.entry for r in t.records], [r.rep for r in t.records], values)
+
+
 def report(s: Season) -> str:
     first = s.runs[0]
     lines = [
@@ -91,7 +99,7 @@ def report(s: Season) -> str:
             "reference" if off is None else f"{off.median_m * 1000:+.1f} ± {off.se_m * 1000:.1f}"
         )
         cells = "" if off is None else str(off.n_cells)
-        h2 = heritabilities(rt.table)["height"] if any(r.entry for r in rt.records) else None
+        h2 = _height_h2(rt.table) if any(r.entry for r in rt.records) else None
         h2s = "" if h2 is None or not h2.ok else f"{h2.h2_mean:.3f}"
         ok = rt.table.quality.count("ok")
         lines.append(

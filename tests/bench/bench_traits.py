@@ -122,6 +122,7 @@ def main() -> int:
     ap.add_argument("--step", type=float, default=0.36, help="scan step (deg)")
     ap.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
     ap.add_argument("--no-timings", action="store_true", help="skip the command's timings")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the run folders here")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
@@ -133,7 +134,7 @@ def main() -> int:
     by_seed: list[ev.SeedScore] = []
     out: dict[str, Any] = {"seeds": args.seeds, "dates": [d.isoformat() for d in DATES]}
     with tempfile.TemporaryDirectory() as d:
-        runs = Path(d)
+        runs = Path(d) if args.keep is None else args.keep
         season_runs: list[Path] = []
         for seed in args.seeds:
             try:
