@@ -42,6 +42,7 @@ from common.field import load_field
 from common.messages.plan import PlanResult
 from common.pointcloud import voxel_merge, write_laz
 from phenorover.eval import traits as ev
+from phenorover.eval import traits_bench as fig
 from phenorover.eval.registration import NAV_SIGMA
 from phenorover.eval.results import Bench
 from services.mission.log import MissionLog
@@ -126,7 +127,7 @@ def main() -> int:
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
-    bench = Bench("bench_traits", ev.error_models(args.step, NAV_SIGMA, TrialConfig()))
+    bench = Bench("bench_traits", fig.error_models(args.step, NAV_SIGMA, TrialConfig()))
     layout, field = load_field("trial")
     pr = plan(layout, field=field)
     xy = [field.cand_xy[field.candidate_index(c)] for c in pr.selected]
@@ -159,7 +160,7 @@ def main() -> int:
             if not season_runs:
                 season_runs = [rt.run_dir for rt, _ in dates]
                 _plan_experiment(bench, seed, dates[-1][0], pr, out)
-        ev.record_scores(bench, by_seed)
+        fig.record_scores(bench, by_seed)
         if not args.no_timings:
             _timings(bench, args, season_runs, xy, pr, runs, out)
     out["scores"] = [msgspec.to_builtins(s) for s in by_seed]
@@ -186,12 +187,12 @@ def _plan_experiment(
         cmp = compare_plans(world, locations(pr), locations(mp))
     except Exception as exc:
         bench.fail("plan from the survey", f"{type(exc).__name__}: {exc}")
-        ev.record_plan(bench, None, None, None, str(exc))
+        fig.record_plan(bench, None, None, None, str(exc))
         return
     cmp["tour_m"] = {"nominal": pr.tour.length, "measured": mp.tour.length}
     out["plan_from_survey"] = cmp
     print("plan from the survey:", cmp)
-    ev.record_plan(bench, cmp, pr, mp)
+    fig.record_plan(bench, cmp, pr, mp)
 
 
 def _timings(
@@ -205,7 +206,7 @@ def _timings(
 ) -> None:
     """``phenorover traits`` on one survey and on five dates of one seed."""
     if not season_runs:
-        ev.record_times(bench, None, None, "no survey was simulated")
+        fig.record_times(bench, None, None, "no survey was simulated")
         return
     try:
         one = _cli_time(season_runs[-1:])
@@ -215,10 +216,10 @@ def _timings(
         five = _cli_time(season_runs)
     except Exception as exc:
         bench.fail("timings", f"{type(exc).__name__}: {exc}")
-        ev.record_times(bench, None, None, str(exc))
+        fig.record_times(bench, None, None, str(exc))
         return
     out["cli_s"] = {"one": one, "five": five}
-    ev.record_times(bench, one, five)
+    fig.record_times(bench, one, five)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,183 @@
+"""The traits benchmark's figures (``tests/bench/bench_traits.py``): targets, error
+models and the figures of :mod:`phenorover.eval.traits`' scores, each the mean over
+the seeds with their spread."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections.abc import Sequence
+from typing import Any
+
+from phenorover.eval.results import Bench, Goal, spread
+from phenorover.eval.traits import SeedScore
+
+TARGETS = {
+    "height_rmse_cm": 2.0,
+    "cover_mape_pct": 5.0,
+    "volume_mape_pct": 5.0,
+    "growth_rmse_cm": 2.0,
+    "h2_abs_diff": 0.05,
+    "one_s": 10.0,
+    "season_s": 30.0,
+}
+
+
+def error_models(step_deg: float, nav: dict[str, float], trial: Any) -> dict[str, str]:
+    """The models the traits benchmark draws under: the survey's (navigation, FARO,
+    terrain: as the registration benchmark) and the trial's growth and variation."""
+    from phenorover.eval.error_models import faro, terrain
+    from services.sim.world import WorldConfig
+
+    w = WorldConfig()
+    return {
+        "navigation pose (drawn per scan)": (
+            f"{100 * nav['xy_m']:g} cm horizontal, {100 * nav['z_m']:g} cm vertical, "
+            f"{nav['yaw_deg']:g} deg heading (1 sigma, independent per scan)"
+        ),
+        **faro(w.scanner_noise, nav["tilt_deg"]),
+        **terrain(w.terrain),
+        "scan": f"{step_deg:g} deg steps from the planner's locations on the nominal boxes",
+        "trial (services.sim.trial, assumptions)": (
+            f"logistic growth, rate {trial.rate_per_day:g}/day, inflection "
+            f"{trial.inflection_days:g} days; genetic sd height/width/density "
+            f"{trial.entry_sd_height:g}/{trial.entry_sd_width:g}/{trial.entry_sd_density:g}, "
+            f"plot sd {trial.plot_sd_height:g}/{trial.plot_sd_width:g}/"
+            f"{trial.plot_sd_density:g} (log scale); gaps {trial.gap_rate:.0%} (runs "
+            f"{trial.gap_run:g}); {trial.lean_share:.0%} of plants leaning "
+            f"{trial.lean_deg_min:g}-{trial.lean_deg_max:g} deg"
+        ),
+    }
+
+
+def _fig(bench: Bench, name: str, values: list[float], unit: str, **kw: Any) -> None:
+    vals = [v for v in values if math.isfinite(v)]
+    value = statistics.mean(vals) if vals else None
+    note = spread(vals)
+    bench.figure(name, value, unit, note=note, missing="no seed measured it", **kw)
+
+
+def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
+    """The accuracy figures, each the mean over the seeds with their spread."""
+    close = {
+        "height": "a scanner position that sees the canopy top (a mast above the crop), "
+        "or a smaller CHM percentile",
+        "cover": "cells seen from above; more scan locations per plot",
+        "volume": "more scan locations (the canopy's far side is occluded from one lane)",
+        "h2": "a smaller height error (the plot noise it adds lowers H2)",
+    }
+    for k in range(len(DATE_LABELS)):
+        label = DATE_LABELS[k]
+        errs = [s.errors[k] for s in seeds if k < len(s.errors)]
+        _fig(
+            bench,
+            f"canopy height RMSE against the truth ({label})",
+            [e["height"].rmse * 100 for e in errs],
+            "cm",
+            goal=Goal("<=", TARGETS["height_rmse_cm"], close["height"]),
+            headline=k == len(DATE_LABELS) - 1,
+        )
+        _fig(bench, f"canopy height bias ({label})", [e["height"].bias * 100 for e in errs], "cm")
+        _fig(
+            bench,
+            f"projected cover, mean abs. error per plot ({label})",
+            [e["cover"].mape for e in errs],
+            "%",
+            goal=Goal("<=", TARGETS["cover_mape_pct"], close["cover"]),
+        )
+        for t, name in (("volume_voxel", "voxel volume"), ("volume_hull", "hull volume")):
+            _fig(
+                bench,
+                f"{name}, mean abs. error per plot ({label})",
+                [e[t].mape for e in errs],
+                "%",
+                goal=Goal("<=", TARGETS["volume_mape_pct"], close["volume"])
+                if t == "volume_voxel"
+                else None,
+            )
+        _fig(
+            bench,
+            f"plots left out as occluded or empty ({label})",
+            [float(e["height"].flagged) for e in errs],
+            "plots",
+        )
+    _fig(
+        bench,
+        "growth in height between the dates, RMSE against the true growth",
+        [s.growth.rmse * 100 for s in seeds],
+        "cm",
+        goal=Goal("<=", TARGETS["growth_rmse_cm"], close["height"]),
+        headline=True,
+    )
+    _fig(
+        bench,
+        "heritability (entry-mean H2) of height: |measured - true|, same plots",
+        [abs(s.h2_measured - s.h2_true) for s in seeds],
+        "",
+        goal=Goal("<=", TARGETS["h2_abs_diff"], close["h2"]),
+        headline=True,
+    )
+    _fig(bench, "heritability of height, measured", [s.h2_measured for s in seeds], "")
+    _fig(
+        bench,
+        "heritability of height, true plants, the same plots",
+        [s.h2_true for s in seeds],
+        "",
+    )
+    _fig(
+        bench,
+        "heritability of height, true plants, every plot (flagged ones too)",
+        [s.h2_true_all for s in seeds],
+        "",
+    )
+
+
+def record_times(bench: Bench, one: float | None, five: float | None, why: str = "") -> None:
+    """``phenorover traits`` wall times (one seed's runs)."""
+    bench.figure(
+        "phenorover traits, one 60-plot survey (wall, the command)",
+        one,
+        "s",
+        goal=Goal("<=", TARGETS["one_s"], "CSF on fewer points (a coarser lowest-point grid)"),
+        headline=True,
+        missing=why,
+    )
+    bench.figure(
+        "phenorover traits, a season of five dates (wall, the command)",
+        five,
+        "s",
+        goal=Goal("<=", TARGETS["season_s"], "the dates read and computed in parallel"),
+        headline=True,
+        missing=why,
+    )
+
+
+def record_plan(
+    bench: Bench, cmp: dict[str, Any] | None, nominal: Any, measured: Any, why: str = ""
+) -> None:
+    """Planning from the survey against planning on the nominal boxes: the true foliage
+    cells each plan's scans see, with their locations and tour lengths beside."""
+    base = None if cmp is None else 100 * cmp["nominal"]["share"]
+    for name, plan in (("nominal", nominal), ("measured", measured)):
+        c = None if cmp is None else cmp[name]
+        note = ""
+        if cmp is not None and c is not None:
+            note = (
+                f"{c['cells_seen']} of {cmp['cells_total']} true cells from "
+                f"{c['locations']} locations, tour {plan.tour.length:.1f} m"
+            )
+        goal = None
+        if name == "measured" and base is not None:
+            goal = Goal(">=", base, "more scan locations where the measured crop is hidden")
+        bench.figure(
+            f"true foliage cells seen, plan on the {name} boxes",
+            None if c is None else 100 * c["share"],
+            "%",
+            note=note,
+            missing=why or "not measured",
+            goal=goal,
+            headline=name == "measured",
+        )
+
+
+DATE_LABELS = ("70 days after planting", "91 days after planting")
