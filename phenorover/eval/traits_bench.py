@@ -23,7 +23,9 @@ TARGETS = {
 }
 
 
-def error_models(step_deg: float, nav: dict[str, float], trial: Any) -> dict[str, str]:
+def error_models(
+    step_deg: float, nav: dict[str, float], trial: Any, foliage_voxel: float
+) -> dict[str, str]:
     """The models the traits benchmark draws under: the survey's (navigation, FARO,
     terrain: as the registration benchmark) and the trial's growth and variation."""
     from phenorover.eval.error_models import faro, terrain
@@ -38,6 +40,8 @@ def error_models(step_deg: float, nav: dict[str, float], trial: Any) -> dict[str
         **faro(w.scanner_noise, nav["tilt_deg"]),
         **terrain(w.terrain),
         "scan": f"{step_deg:g} deg steps from the planner's locations on the nominal boxes",
+        "plants": f"foliage in {foliage_voxel * 100:g} cm voxels; true heights are their "
+        "top faces, a scanner below the canopy top hits their sides",
         "trial (services.sim.trial, assumptions)": (
             f"logistic growth, rate {trial.rate_per_day:g}/day, inflection "
             f"{trial.inflection_days:g} days; genetic sd height/width/density "

@@ -48,6 +48,7 @@ from phenorover.eval.results import Bench
 from services.mission.log import MissionLog
 from services.planner.core import plan
 from services.register.pipeline import register
+from services.sim.foliage import FoliageConfig
 from services.sim.plant_truth import plant_truth
 from services.sim.render import ScanSettings
 from services.sim.trial import TrialConfig
@@ -66,6 +67,14 @@ DATES = (datetime.date(2026, 7, 10), datetime.date(2026, 7, 31))  # 70 and 91 da
 SEASON = (datetime.date(2026, 6, 20), datetime.date(2026, 7, 1), datetime.date(2026, 7, 20))
 
 
+# the simulated plants' voxel (``--foliage-voxel``; the simulator's default otherwise)
+FOLIAGE = FoliageConfig()
+
+
+def world_config(seed: int, date: datetime.date) -> WorldConfig:
+    return WorldConfig(seed=seed, trial=TrialConfig(date=date), foliage=FOLIAGE)
+
+
 def simulate(
     seed: int, date: datetime.date, xy: list[Any], pr: PlanResult, runs: Path, step: float
 ) -> tuple[RunTraits, list[dict[str, Any]], float]:
@@ -73,7 +82,7 @@ def simulate(
     the registration's time; the run folder (``mission.db``, ``registered.laz``) is
     left in ``runs`` for the command-line timings."""
     layout, field = load_field("trial")
-    world = World(layout, field, WorldConfig(seed=seed, trial=TrialConfig(date=date)))
+    world = World(layout, field, world_config(seed, date))
     truth = plant_truth(layout, field, world.terrain, world.foliage, world.trial)
     run = runs / f"trial-s{seed}-{date.isoformat()}"
     run.mkdir(parents=True)
@@ -124,10 +133,18 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=list(SEEDS))
     ap.add_argument("--no-timings", action="store_true", help="skip the command's timings")
     ap.add_argument("--keep", type=Path, default=None, help="keep the run folders here")
+    ap.add_argument(
+        "--foliage-voxel", type=float, default=None, metavar="M", help="the plants' voxel (m)"
+    )
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING)
-    bench = Bench("bench_traits", fig.error_models(args.step, NAV_SIGMA, TrialConfig()))
+    if args.foliage_voxel is not None:
+        global FOLIAGE
+        FOLIAGE = FoliageConfig(voxel=args.foliage_voxel)
+    bench = Bench(
+        "bench_traits", fig.error_models(args.step, NAV_SIGMA, TrialConfig(), FOLIAGE.voxel)
+    )
     layout, field = load_field("trial")
     pr = plan(layout, field=field)
     xy = [field.cand_xy[field.candidate_index(c)] for c in pr.selected]
@@ -181,7 +198,7 @@ def _plan_experiment(
         world = World(
             layout,
             field,
-            WorldConfig(seed=seed, trial=TrialConfig(date=datetime.date.fromisoformat(rt.date))),
+            world_config(seed, datetime.date.fromisoformat(rt.date)),
         )
         mp = plan_measured(layout, field, rt.crop)
         cmp = compare_plans(world, locations(pr), locations(mp))
