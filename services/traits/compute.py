@@ -27,6 +27,7 @@ from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
 from services.traits.run import Record, RunError, RunInput, load_run
+from services.traits.season import Offset
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -180,18 +181,20 @@ def compute_traits(
     cfg: TraitsConfig,
     found: tuple[F64, GroundModel, float] | None = None,
     heights_from: GroundModel | None = None,
-    dz: float = 0.0,
+    offset: Offset | None = None,
 ) -> RunTraits:
     """The traits of a read run (:func:`.run.load_run`); raises RunError when no
     ground is found. ``found``: :func:`field_ground` of this run, when already
     computed. ``heights_from``: the ground heights are measured from (default: the
-    run's own), raised by ``dz`` metres (a season's reference date's ground, moved
-    onto this date by the vertical offset between them)."""
+    run's own), raised by ``offset`` (a season's reference date's ground, moved onto
+    this date by the offset between them, :meth:`.season.Offset.at`)."""
     xyz, ground, took = found if found is not None else field_ground(inp, cfg)
     timings: dict[str, float] = {"ground": took}
     t = time.perf_counter()
     base = heights_from or ground
-    h = xyz[:, 2] - base.height(xyz[:, 0], xyz[:, 1]) - dz
+    h = xyz[:, 2] - base.height(xyz[:, 0], xyz[:, 1])
+    if offset is not None:
+        h -= offset.at(xyz[:, 0], xyz[:, 1])
     table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
     crop = crop_model(
         xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date

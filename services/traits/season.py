@@ -34,7 +34,12 @@ class Offset(msgspec.Struct, frozen=True, kw_only=True):
     (1.4826 x MAD, Rousseeuw & Croux 1993); ``se_m``: the median's standard error,
     sqrt(pi/2) x sigma / sqrt(n) for normal errors (the median's asymptotic variance
     1 / (4 n f(m)^2), Kendall & Stuart, The Advanced Theory of Statistics, vol. 1);
-    ``n_cells``: cells used; ``exceeds``: ``|median_m| > tolerance_m``.
+    ``n_cells``: cells used. Two registrations can also differ by a tilt (each rests
+    on navigation heights with centimetres of error per scan): ``plane`` (a, b, c) is
+    the offset ``a + b (x - x0) + c (y - y0)`` fitted to the same cells (least squares
+    with outliers beyond 3 sigma dropped), ``centre`` its (x0, y0) (None without cell
+    coordinates); ``exceeds``: the offset, or the plane anywhere over the stable
+    cells, is larger than ``tolerance_m``.
     """
 
     median_m: float
@@ -43,6 +48,30 @@ class Offset(msgspec.Struct, frozen=True, kw_only=True):
     n_cells: int
     tolerance_m: float
     exceeds: bool
+    plane: tuple[float, float, float] | None = None
+    centre: tuple[float, float] | None = None
+
+    def at(self, x: F64, y: F64) -> F64:
+        """The offset at field positions (x, y): the plane where there is one."""
+        if self.plane is None or self.centre is None:
+            return np.full(np.shape(x), self.median_m)
+        a, b, c = self.plane
+        return a + b * (np.asarray(x) - self.centre[0]) + c * (np.asarray(y) - self.centre[1])
+
+
+def _plane(x: F64, y: F64, d: F64) -> tuple[tuple[float, float, float], tuple[float, float]]:
+    """A plane through ``d`` over (x, y), refitted three times without the points
+    beyond 3 robust sigma of it."""
+    x0, y0 = float(np.median(x)), float(np.median(y))
+    a = np.column_stack([np.ones_like(x), x - x0, y - y0])
+    keep = np.ones(len(d), dtype=bool)
+    coef: npt.NDArray[np.floating] = np.zeros(3)
+    for _ in range(4):
+        coef = np.linalg.lstsq(a[keep], d[keep], rcond=None)[0]
+        r = d - a @ coef
+        sigma = MAD_TO_SIGMA * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        keep = np.abs(r) <= 3 * max(sigma, 1e-6)
+    return (float(coef[0]), float(coef[1]), float(coef[2])), (x0, y0)
 
 
 def vertical_offset(
@@ -52,6 +81,7 @@ def vertical_offset(
     *,
     tolerance_m: float = 0.01,
     min_cells: int = 50,
+    centres: tuple[F64, F64] | None = None,
 ) -> Offset:
     """The offset of ``ground`` against ``ground_ref``: two ground-height grids (m) of
     the same shape from two dates (NaN: no ground found there), compared on the cells
@@ -60,8 +90,9 @@ def vertical_offset(
     ``tolerance_m`` (default 1 cm): below it the dates agree within what registration
     achieves (the paper reports ~2 cm mean point errors for one registration; a median
     over many cells is tighter), so a smaller offset is noise and should not be
-    subtracted. Raises ValueError when the shapes differ or fewer than ``min_cells``
-    stable cells hold ground on both dates.
+    subtracted. ``centres``: the cells' x and y (grids of the same shape), to fit
+    the tilt between the dates too. Raises ValueError when the shapes differ or fewer
+    than ``min_cells`` stable cells hold ground on both dates.
     """
     if ground_ref.shape != ground.shape or stable.shape != ground.shape:
         raise ValueError(
@@ -69,7 +100,8 @@ def vertical_offset(
             f"{ground.shape}, {stable.shape}"
         )
     diff = ground[stable] - ground_ref[stable]
-    diff = diff[np.isfinite(diff)]
+    finite = np.isfinite(diff)
+    diff = diff[finite]
     if diff.size < min_cells:
         raise ValueError(
             f"the dates share no stable ground ({diff.size} common stable cells, "
@@ -77,13 +109,24 @@ def vertical_offset(
         )
     med = float(np.median(diff))
     sigma = MAD_TO_SIGMA * float(np.median(np.abs(diff - med)))
+    plane = centre = None
+    largest = abs(med)
+    if centres is not None:
+        x, y = centres[0][stable][finite], centres[1][stable][finite]
+        plane, centre = _plane(x, y, diff)
+        a, b, c = plane
+        corners = [a + b * (px - centre[0]) + c * (py - centre[1])
+                   for px in (x.min(), x.max()) for py in (y.min(), y.max())]  # fmt: skip
+        largest = max(largest, *(abs(v) for v in corners))
     return Offset(
         median_m=med,
         sigma_m=sigma,
         se_m=math.sqrt(math.pi / 2.0) * sigma / math.sqrt(diff.size),
         n_cells=int(diff.size),
         tolerance_m=tolerance_m,
-        exceeds=abs(med) > tolerance_m,
+        exceeds=largest > tolerance_m,
+        plane=plane,
+        centre=centre,
     )
 
 

@@ -86,12 +86,12 @@ def report(s: Season) -> str:
         f"# Season of {first.layout.name!r}: {len(s.runs)} surveys",
         "",
         "Heights are measured above the first survey's ground, moved onto each date by "
-        "the vertical offset between the dates' stable ground (lanes, headlands) when "
-        "it exceeds the tolerance.",
+        "the offset and tilt between the dates' stable ground (lanes, headlands) when "
+        "they exceed the tolerance.",
         "",
-        "| date | days after planting | survey | ground offset (mm) | stable cells | "
-        "corrected | plots ok | H2 of height |",
-        "|---|---|---|---|---|---|---|---|",
+        "| date | days after planting | survey | ground offset (mm) | tilt x, y (mm/m) | "
+        "stable cells | corrected | plots ok | H2 of height |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for d, rt in enumerate(s.runs):
         off = s.offsets[d]
@@ -99,11 +99,16 @@ def report(s: Season) -> str:
             "reference" if off is None else f"{off.median_m * 1000:+.1f} ± {off.se_m * 1000:.1f}"
         )
         cells = "" if off is None else str(off.n_cells)
+        tilt = (
+            ""
+            if off is None or off.plane is None
+            else (f"{off.plane[1] * 1000:+.2f}, {off.plane[2] * 1000:+.2f}")
+        )
         h2 = _height_h2(rt.table) if any(r.entry for r in rt.records) else None
         h2s = "" if h2 is None or not h2.ok else f"{h2.h2_mean:.3f}"
         ok = rt.table.quality.count("ok")
         lines.append(
-            f"| {rt.date} | {s.days[d]:g} | {rt.run_dir.name} | {shift} | {cells} | "
+            f"| {rt.date} | {s.days[d]:g} | {rt.run_dir.name} | {shift} | {tilt} | {cells} | "
             f"{'yes' if s.corrected[d] else 'no'} | {ok} | {h2s} |"
         )
     if s.fits:

@@ -3,11 +3,13 @@
 Before any change is measured the dates are checked against each other on stable
 ground (lanes and headlands, more than ``stable_margin`` from every plot): the median
 vertical offset of each date's ground against the earliest date's
-(:func:`.season.vertical_offset`). Heights are then measured above one ground for
+(:func:`.season.vertical_offset`), with the tilt between the two registrations (a
+plane fitted to the same cells). Heights are then measured above one ground for
 every date, the earliest survey's (it sees the most bare soil; under a closed canopy
-a later survey's ground is interpolated from the lanes), moved onto each date by its
-offset when the offset exceeds ``offset_tolerance_m`` (smaller ones are within what
-registration achieves, and correcting them would add their noise). Then per plot:
+a later survey's ground is interpolated from the lanes), moved onto each date by that
+plane when it exceeds ``offset_tolerance_m`` anywhere over the stable ground
+(smaller ones are within what registration achieves, and correcting them would add
+their noise). Then per plot:
 growth between consecutive dates, and a logistic growth curve (:func:`.season.
 fit_logistic`) once there are three dates or more.
 
@@ -96,6 +98,8 @@ def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig) -> Season:
     ref = found[0][1]
     boxes = inputs[0].field.plot_boxes
     stable_ref = ref.stable_mask(boxes, cfg.stable_margin)
+    gx, gy = ref.centres()
+    cx, cy = np.meshgrid(gx, gy)  # (ny, nx), as the ground grids
     offsets: list[Offset | None] = [None]
     corrected = [False]
     runs = [compute_traits(inputs[0], cfg, found[0])]
@@ -107,18 +111,21 @@ def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig) -> Season:
                 g.z,
                 stable_ref & g.stable_mask(boxes, cfg.stable_margin),
                 tolerance_m=cfg.offset_tolerance_m,
+                centres=(cx, cy),
             )
         except ValueError as exc:
             raise RunError(f"{inp.run_dir} against {inputs[0].run_dir}: {exc}") from None
         offsets.append(off)
         corrected.append(off.exceeds)
-        dz = off.median_m if off.exceeds else 0.0
+        plane = off.plane or (off.median_m, 0.0, 0.0)
         log.info(
-            "%s: ground %+.1f mm against %s over %d stable cells%s",
+            "%s: ground %+.1f mm against %s over %d stable cells (tilt %+.2f, %+.2f "
+            "mm/m)%s",
             inp.date, off.median_m * 1000, inputs[0].date, off.n_cells,
-            ", corrected" if off.exceeds else "",
+            plane[1] * 1000, plane[2] * 1000, ", corrected" if off.exceeds else "",
         )  # fmt: skip
-        runs.append(compute_traits(inp, cfg, f, heights_from=ref, dz=dz))
+        shift = off if off.exceeds else None
+        runs.append(compute_traits(inp, cfg, f, heights_from=ref, offset=shift))
     days = _days(inputs)
     ok = np.array([[q == OK for q in r.table.quality] for r in runs])
     height = np.where(ok, np.array([r.table.column("height") for r in runs]), np.nan)

@@ -57,6 +57,21 @@ def test_offset_below_tolerance_is_agreement():
     assert off.tolerance_m == 0.01
 
 
+def test_offset_fits_the_tilt_between_two_registrations():
+    yy, xx = np.mgrid[0:80, 0:60] * 0.1
+    # no offset on average, but 1.5 cm per 6 m along x: the ends differ by +-4.5 mm
+    tilt = 0.0025 * (xx - xx.mean())
+    ref, new, stable = _grounds(0.0, seed=2)
+    new = new + tilt
+    flat = vertical_offset(ref, new, stable)
+    assert not flat.exceeds and flat.plane is None  # no cell positions: no tilt
+    off = vertical_offset(ref, new, stable, tolerance_m=0.004, centres=(xx, yy))
+    assert off.plane is not None and off.plane[1] == pytest.approx(0.0025, abs=0.0003)
+    assert abs(off.plane[2]) < 0.0003 and off.exceeds  # the ends are beyond 4 mm
+    at = off.at(np.array([0.0, 5.9]), np.array([1.0, 1.0]))
+    assert at == pytest.approx(tilt[10, [0, 59]], abs=0.002)
+
+
 def test_offset_without_common_stable_ground_raises():
     ref, new, stable = _grounds(0.0)
     new[stable] = np.nan
