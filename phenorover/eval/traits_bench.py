@@ -64,10 +64,16 @@ def _fig(bench: Bench, name: str, values: list[float], unit: str, **kw: Any) -> 
 def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
     """The accuracy figures, each the mean over the seeds with their spread."""
     close = {
-        "height": "a scanner position that sees the canopy top (a mast above the crop), "
-        "or a smaller CHM percentile",
-        "cover": "cells seen from above; more scan locations per plot",
-        "volume": "more scan locations (the canopy's far side is occluded from one lane)",
+        "height": "a view of the canopy's top: once the crop outgrows the 1 m scanner "
+        "(91 days) it sees the top leaves' sides, below their tops (heights fall short, "
+        "bias below); a scanner raised above the crop, or scan locations along the "
+        "lanes; part is the simulator's 4 cm leaf voxels (a side hit lies up to 4 cm "
+        "below the top face), which 2 cm voxels would halve",
+        "cover": "scan locations that see each plot from both lanes",
+        "volume": "voxel occupancy counts only the surfaces the scanner saw: the far side "
+        "and inside of plots seen from their ends or one lane are missing; scan "
+        "locations along the lanes, or a volume that fills what a side view bounds "
+        "(the hull volume's error is beside it)",
         "h2": "a smaller height error (the plot noise it adds lowers H2)",
     }
     for k in range(len(DATE_LABELS)):
