@@ -48,6 +48,8 @@ REGISTER_MODULE = "services.register"
 TRAITS_MODULE = "services.traits"
 # (level, text): a mission event
 Report = Callable[[str, str], None]
+# how the event of a registration that succeeded begins
+REGISTERED = "registration done"
 
 
 class RegistrationJob:
@@ -119,7 +121,7 @@ class RegistrationJob:
         if rc != 0:
             self.report("error", f"registration failed (exit {rc}): {_last_line(self.log_path)}")
             return
-        self.report("info", f"registration done: {self.run_dir / 'report.md'}")
+        self.report("info", f"{REGISTERED}: {self.run_dir / 'report.md'}")
         if not self.traits:
             return
         try:

@@ -38,7 +38,7 @@ from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
-from services.mission.registration import RegistrationJob
+from services.mission.registration import REGISTERED, RegistrationJob
 from services.mission.sources import new_mission, requested_plan, unfinished
 from services.mission.survey import Survey
 
@@ -315,8 +315,10 @@ class MissionService:
 
         def done(level: str, text: str) -> None:
             # the next mission may have started meanwhile: the outcome goes to this
-            # one's log and events, and to the state's detail only while it is current
-            if self.mission == mission:
+            # one's log and events, and to the state's detail only while it is current;
+            # a registration the traits follow keeps the detail "registering" until
+            # they start, so nobody waiting on the detail sees the work done between
+            if self.mission == mission and not (job.traits and text.startswith(REGISTERED)):
                 self.detail = text
             self.event(level, text, log, mission)
 
