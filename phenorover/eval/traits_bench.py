@@ -40,8 +40,7 @@ def error_models(
         **faro(w.scanner_noise, nav["tilt_deg"]),
         **terrain(w.terrain),
         "scan": f"{step_deg:g} deg steps from the planner's locations on the nominal boxes",
-        "plants": f"foliage in {foliage_voxel * 100:g} cm voxels; true heights are their "
-        "top faces, a scanner below the canopy top hits their sides",
+        "plants": f"foliage in {foliage_voxel * 100:g} cm voxels; true heights are their top faces",
         "trial (services.sim.trial, assumptions)": (
             f"logistic growth, rate {trial.rate_per_day:g}/day, inflection "
             f"{trial.inflection_days:g} days; genetic sd height/width/density "
@@ -65,10 +64,10 @@ def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
     """The accuracy figures, each the mean over the seeds with their spread."""
     close = {
         "height": "a view of the canopy's top: once the crop outgrows the 1 m scanner "
-        "(91 days) it sees the top leaves' sides, below their tops (heights fall short, "
-        "bias below); a scanner raised above the crop, or scan locations along the "
-        "lanes; part is the simulator's 4 cm leaf voxels (a side hit lies up to 4 cm "
-        "below the top face), which 2 cm voxels would halve",
+        "(91 days) it sees the sides of each plot's top, not its tallest tips (heights "
+        "fall short, bias below); finer simulated leaves do not close it (tried with "
+        "--foliage-voxel 0.02); a scanner raised above the crop, or scan locations "
+        "along the lanes, would",
         "cover": "scan locations that see each plot from both lanes",
         "volume": "voxel occupancy counts only the surfaces the scanner saw: the far side "
         "and inside of plots seen from their ends or one lane are missing; scan "
