@@ -38,6 +38,7 @@ from common import keys
 from common.messages.mission import (
     COMPUTING_TRAITS,
     POST_PROCESSING,
+    REGISTERING,
     MissionPhase,
     MissionState,
 )
@@ -152,6 +153,35 @@ class RegistrationJob:
         except subprocess.TimeoutExpired:
             os.kill(p.pid, signal.SIGKILL)
             p.wait()
+
+
+def start_registration(
+    run_dir: Path,
+    manifest: Path | None,
+    traits: bool,
+    detail: Callable[[str], None],
+    event: Report,
+) -> RegistrationJob | None:
+    """Start the registration (and then the traits) of ``run_dir``; every outcome is an
+    ``event`` and the mission state's ``detail``, except a registration the traits
+    follow: the detail stays :data:`REGISTERING` until they start, so nobody waiting
+    on it sees the gap between the two. None (and an error event) when it cannot
+    start."""
+
+    def report(level: str, text: str) -> None:
+        if not (traits and text.startswith(REGISTERED)):
+            detail(text)
+        event(level, text)
+
+    job = RegistrationJob(run_dir, report, manifest, traits)
+    try:
+        job.start()
+    except OSError as exc:
+        event("error", f"registration not started: {exc}")
+        return None
+    detail(REGISTERING)
+    event("info", f"{REGISTERING} the scans: log in {job.log_path}")
+    return job
 
 
 def _last_line(path: Path) -> str:

@@ -1,12 +1,9 @@
 """The mission supervisor's Zenoh shell: runs a survey with nobody in the loop.
 
-For each scan location in tour order: send the legs to navigation, wait for
-arrival, wait until the robot is still and localized, scan over the scanner service,
-record the scan and the pose statistics over it in the mission log, and go on;
-finally return to the Origin. Every step is committed to ``mission.db`` before the
-next begins; a restarted service resumes at the first unfinished location and never
-scans a location twice (a scan interrupted by a crash is taken from the scanner if
-it finished, redone only if it did not).
+It takes commands, starts, pauses, resumes and aborts missions, walks each one's
+locations (:mod:`.tour`), returns to the Origin and registers the scans. Every step
+is committed to ``mission.db`` before the next begins; a restarted service resumes
+at the first unfinished location and never scans a location twice.
 """
 
 from __future__ import annotations
@@ -14,13 +11,10 @@ from __future__ import annotations
 import threading
 import time
 
-import msgspec
-
 from common import clock as clk
 from common import keys
 from common.messages.mission import (
     FINAL_PHASES,
-    REGISTERING,
     MissionAbort,
     MissionCommand,
     MissionEvent,
@@ -38,9 +32,10 @@ from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
-from services.mission.registration import REGISTERED, RegistrationJob
+from services.mission.registration import RegistrationJob, start_registration
 from services.mission.sources import new_mission, requested_plan, unfinished
 from services.mission.survey import Survey
+from services.mission.tour import clock_started, walk
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0
@@ -237,24 +232,9 @@ class MissionService:
         assert log is not None and sv is not None
         try:
             # a resumed survey waits for the clock: every deadline is taken from it
-            if not self._clock_started(self._wake):
+            if not clock_started(self.ctx.clock, self._wake, self.ctx.log):
                 raise Aborted
-            by_cand = {s.cand_id: s for s in segs if s.cand_id is not None}
-            for step in log.steps():
-                if step.status in ("done", "failed", "skipped"):
-                    continue
-                if self._wake.is_set():  # aborted while planning: not one route sent
-                    raise Aborted
-                self.current = step.scan_id
-                tag = f"scan {step.scan_id} (location {step.cand_id})"
-                if step.status == "scanning":
-                    self.phase = MissionPhase.SETTLING
-                    if sv.scans.found_on_scanner(step):
-                        self.event("info", f"{tag}: done")
-                        continue
-                    # whatever the scanner holds for it is not taken after another restart
-                    log.update(step.idx, status="driving")
-                self._visit(step.idx, by_cand[step.cand_id], tag)
+            walk(self, log, sv, self.cfg, segs, self._wake)
             home = [s for s in segs if s.cand_id is None]
             if self.cfg.return_to_origin and home:
                 self.phase, self.detail, self.current = MissionPhase.RETURNING, "to Origin", 0
@@ -280,69 +260,26 @@ class MissionService:
             self.event("error", f"mission {self.mission} stopped: {exc}")
             self.phase = MissionPhase.FAILED
 
-    def _visit(self, idx: int, seg: Segment, tag: str) -> None:
-        """Position, scan (with retries, each re-checking the pose), record."""
-        log, sv = self.log, self.survey
-        assert log is not None and sv is not None
-        step = log.steps()[idx]
-        drive = step.status in ("pending", "driving")
-        if drive:
-            log.update(idx, status="driving")
-        why = ""
-        for _ in range(step.attempts, self.cfg.scan_retries + 1):
-            self.phase = MissionPhase.DRIVING if drive else MissionPhase.SETTLING
-            why = sv.position(log.steps()[idx], seg, tag, drive_first=drive)
-            if why:
-                log.update(idx, status="skipped", reason=f"location not reached: {why}")
-                self.event("error", f"{tag}: skipped, location not reached: {why}")
-                return
-            self.phase = MissionPhase.SCANNING
-            prof = msgspec.structs.replace(self.cfg.profile, scan_id=log.steps()[idx].scan_id)
-            why = sv.scans.scan(log.steps()[idx], prof)
-            if not why:
-                self.event("info", f"{tag}: done")
-                return
-            self.event("warning", f"{tag}: {why}")
-            drive = False  # position() drives again when the robot is off
-        log.update(idx, status="failed", reason=why)
-        self.event("error", f"{tag}: failed after {self.cfg.scan_retries + 1} attempts: {why}")
-
     # --- registration at the end (see services/mission/registration.py for why here) ---
     def _register(self) -> None:
         log, mission = self.log, self.mission
         assert log is not None
-        run_dir = log.path.parent
 
-        def done(level: str, text: str) -> None:
-            # the next mission may have started meanwhile: the outcome goes to this
-            # one's log and events, and to the state's detail only while it is current;
-            # a registration the traits follow keeps the detail "registering" until
-            # they start, so nobody waiting on the detail sees the work done between
-            if self.mission == mission and not (job.traits and text.startswith(REGISTERED)):
+        def detail(text: str) -> None:
+            # the next mission may have started meanwhile: the detail is this one's
+            # only while it is current (its events go to its own log regardless)
+            if self.mission == mission:
                 self.detail = text
-            self.event(level, text, log, mission)
 
-        job = RegistrationJob(run_dir, done, self.ctx.manifest, self.cfg.traits_on_done)
-        try:
-            job.start()
-        except OSError as exc:
-            self.event("error", f"registration not started: {exc}")
-            return
-        self._registrations.append(job)
-        self.detail = REGISTERING
-        self.event("info", f"{REGISTERING} the scans: log in {job.log_path}")
-
-    def _clock_started(self, stop: threading.Event) -> bool:
-        """Wait for the clock (a sim clock reads 0 until the simulator is heard): every
-        wait of a resumed survey takes its deadline from it, and one taken at 0 has long
-        passed when the first message comes."""
-        if self.ctx.clock.wait_started(0.0):
-            return True
-        self.ctx.log.info("waiting for the clock before resuming")
-        while not stop.is_set():
-            if self.ctx.clock.wait_started(0.5):
-                return True
-        return False
+        job = start_registration(
+            log.path.parent,
+            self.ctx.manifest,
+            self.cfg.traits_on_done,
+            detail,
+            lambda level, text: self.event(level, text, log, mission),
+        )
+        if job is not None:
+            self._registrations.append(job)
 
     def run(self, stop: threading.Event) -> None:
         for _ in clk.ticks(self.ctx.clock, 1.0, stop):
