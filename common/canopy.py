@@ -92,7 +92,8 @@ def footprint_cells(box: F64, cell: float) -> tuple[int, int]:
 def plot_traits(xy: F64, h: F64, box: F64, d: CanopyDefinition) -> dict[str, float]:
     """The traits of one plot from points ``xy`` (N, 2) at heights ``h`` (N,) above the
     ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]. Heights and
-    volumes are NaN when the plot holds no canopy point."""
+    volumes are NaN when the plot holds no canopy point, and cover too when it holds
+    no point at all."""
     nx, ny = footprint_cells(box, d.cell)
     ix = np.clip(((xy[:, 0] - box[0]) / d.cell).astype(np.int64), 0, nx - 1)
     iy = np.clip(((xy[:, 1] - box[1]) / d.cell).astype(np.int64), 0, ny - 1)
@@ -107,7 +108,8 @@ def plot_traits(xy: F64, h: F64, box: F64, d: CanopyDefinition) -> dict[str, flo
     out = {"points": float(len(h)), "seen": float((near & far).mean())}
     canopy = h >= d.min_height
     if not canopy.any():
-        return {**out, "cover": 0.0, **dict.fromkeys(_SHAPE, math.nan)}
+        # nothing seen: cover unknown; seen, with no canopy: cover 0
+        return {**out, "cover": 0.0 if len(h) else math.nan, **dict.fromkeys(_SHAPE, math.nan)}
     flat = (ix * ny + iy)[canopy]
     chm = np.full(nx * ny, -np.inf)
     np.maximum.at(chm, flat, h[canopy])

@@ -18,8 +18,6 @@ has ``box`` None and no columns.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.field import Field, FieldLayout
+from common.files import atomic_write
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -192,16 +191,8 @@ def _occupied_columns(xy: F64, plot: I64, boxes: F64, grid: I64) -> list[npt.NDA
 
 def write(path: str | Path, model: CropModel) -> None:
     """Write ``model`` as JSON to ``path`` atomically (a reader never sees half a file)."""
-    path = Path(path)
     data = msgspec.json.encode(model)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(Path(path), lambda p: p.write_bytes(data))
 
 
 def read(path: str | Path, field: Field | None = None) -> CropModel:

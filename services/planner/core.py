@@ -63,6 +63,8 @@ def plan(
     timings: dict[str, float] = {}
     t = time.perf_counter()
     fld = field if field is not None else build_field(layout)
+    if targets is not None and targets.shape != (fld.n_cells,):
+        raise ValueError(f"targets: {targets.shape} flags for {fld.n_cells} cells")
     nav = Navigator(fld, opt.nav, opt.open_rows, opt.open_cross)
     timings["field"] = time.perf_counter() - t
 
@@ -77,8 +79,6 @@ def plan(
     )
     timings["visibility"] = time.perf_counter() - t
     every = vis.matrix(opt.min_hits)
-    if targets is not None and targets.shape != (fld.n_cells,):
-        raise ValueError(f"targets: {targets.shape} flags for {fld.n_cells} cells")
     # the cover, and every count of cells, only over the target cells
     mat = every if targets is None else every[:, np.flatnonzero(targets)]
     seen = np.asarray(mat.sum(axis=1)).ravel()

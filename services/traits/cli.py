@@ -8,10 +8,9 @@ options it ran with: :mod:`.config`, the manifest's ``[services.traits]``,
 ``--config``, ``--set`` and the flags). See :mod:`.outputs` for the files and
 :mod:`.run` for where the survey date comes from (``--date`` overrides it).
 
-Several run folders of one field: a season (:mod:`.series`): each run's outputs go
-into its own folder (into ``--out/<run folder name>`` with ``--out``) and the
-season's (:mod:`.season_outputs`) into ``--out`` (default: ``season-<field>`` beside
-the last run).
+Several run folders of one field: a season (:mod:`.series`), written into ``--out``
+(default: ``season-<field>`` beside the last run): the season's files
+(:mod:`.season_outputs`) and each date's own in ``<out>/<run folder name>``.
 
 Every file is written under a temporary name and renamed when complete, so an
 interrupted run leaves the previous outputs (or none), never half a file. Bad input
@@ -80,18 +79,19 @@ def _summary(rt: RunTraits, out: Path, seconds: float) -> str:
 
 
 def run_season(runs: list[Path], cfg: TraitsConfig, out: Path | None) -> Path:
-    """A season of ``runs``: each run's own files in its folder (or ``out/<run>``),
-    the season's in ``out`` (default: ``season-<field>`` beside the last run)."""
+    """A season of ``runs``, written into ``out`` (default: ``season-<field>`` beside
+    the last run): the season's files, and each date's own in ``out/<run>``. Not into
+    the runs' folders: a date's heights here stand on the season's first ground, so
+    they would change the run's own outputs with whichever season read it last."""
     from services.traits.season_outputs import write_season
     from services.traits.series import season
 
     t0 = time.monotonic()
     s = season(runs, cfg)
-    for rt in s.runs:
-        dest = rt.run_dir if out is None else out / rt.run_dir.name
-        write_outputs(rt, cfg, dest)
-        print(_summary(rt, dest, sum(rt.timings.values())), flush=True)
     dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
+    for rt in s.runs:
+        write_outputs(rt, cfg, dest / rt.run_dir.name)
+        print(_summary(rt, dest / rt.run_dir.name, sum(rt.timings.values())), flush=True)
     names = write_season(s, dest, cfg.figures)
     print(
         f"season of {len(s.runs)} dates ({s.runs[0].date} to {s.runs[-1].date}) in "

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import TRAITS, CanopyDefinition, plot_traits
-from common.cropmodel import CropModel, crop_model
+from common.cropmodel import CropModel, assign_plots, crop_model
 from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
@@ -74,53 +74,6 @@ class RunTraits:
     crop: CropModel | None = None
 
 
-def _bands(lo: F64, hi: F64, band: I64) -> tuple[F64, F64, I64]:
-    """Per band (a row or a column of plots): its start, its end and its id, sorted by
-    start."""
-    ids, inv = np.unique(band, return_inverse=True)
-    start = np.full(len(ids), np.inf)
-    end = np.full(len(ids), -np.inf)
-    np.minimum.at(start, inv, lo)
-    np.maximum.at(end, inv, hi)
-    order = np.argsort(start)
-    return start[order], end[order], order
-
-
-def _band_of(v: F64, start: F64, end: F64) -> I64:
-    """Index (into the sorted bands) of the band holding each ``v``, -1 for none."""
-    k = np.searchsorted(start, v, side="right") - 1
-    inside = (k >= 0) & (v <= end[np.maximum(k, 0)])
-    return np.where(inside, k, -1)
-
-
-def plot_of(xy: F64, boxes: F64, row: I64, col: I64) -> I64:
-    """The plot holding each point (N,), -1 for none, from the plots' (P, 6) field
-    boxes and their row and column: a point's row of plots and column of plots are
-    found by binary search over the rows' and columns' extents, then the plot there
-    checked exactly (no loop over points or plots)."""
-    rs, re, rorder = _bands(boxes[:, 1], boxes[:, 4], row)
-    cs, ce, corder = _bands(boxes[:, 0], boxes[:, 3], col)
-    _, rinv = np.unique(row, return_inverse=True)
-    _, cinv = np.unique(col, return_inverse=True)
-    # (sorted row band, sorted column band) -> plot
-    rank_r = np.empty_like(rorder)
-    rank_r[rorder] = np.arange(len(rorder))
-    rank_c = np.empty_like(corder)
-    rank_c[corder] = np.arange(len(corder))
-    table = np.full((len(rs) + 1, len(cs) + 1), -1, dtype=np.int64)  # last: no band
-    table[rank_r[rinv], rank_c[cinv]] = np.arange(len(boxes))
-    p = table[_band_of(xy[:, 1], rs, re), _band_of(xy[:, 0], cs, ce)]
-    b = boxes[np.maximum(p, 0)]
-    inside = (
-        (p >= 0)
-        & (xy[:, 0] >= b[:, 0])
-        & (xy[:, 0] <= b[:, 3])
-        & (xy[:, 1] >= b[:, 1])
-        & (xy[:, 1] <= b[:, 4])
-    )
-    return np.where(inside, p, -1)
-
-
 def quality_of(traits: dict[str, float], min_seen: float) -> str:
     if traits["points"] == 0:
         return NO_POINTS
@@ -133,7 +86,7 @@ def trait_table(
     """The :class:`TraitTable` of points ``xy`` (N, 2) at heights ``h`` above the
     ground over ``field``'s plots."""
     boxes = field.plot_boxes
-    p = plot_of(xy, boxes, field.plot_row, field.plot_col)
+    p = assign_plots(xy, boxes, field.plot_row, field.plot_col, 0.0)
     inside = np.flatnonzero(p >= 0)
     order = inside[np.argsort(p[inside], kind="stable")]
     ends = np.cumsum(np.bincount(p[inside], minlength=len(boxes)))
@@ -144,8 +97,6 @@ def trait_table(
         foot = boxes[k, [0, 1, 3, 4]]
         t = plot_traits(xy[idx], h[idx], foot, cfg.definition)
         quality.append(quality_of(t, cfg.min_seen))
-        if quality[-1] == NO_POINTS:
-            t = {**t, "cover": float("nan"), "seen": 0.0}  # nothing seen: cover unknown
         values[k] = [t[n] for n in NAMES]
     return TraitTable(records, values, quality, date, cfg.definition)
 

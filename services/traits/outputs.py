@@ -43,8 +43,9 @@ DECIMALS = {"m": 3, "m3": 4, "1": 3}
 COUNTS = ("points",)
 
 
-def _text(text: str) -> Callable[[Path], object]:
-    return lambda p: p.write_text(text, encoding="utf-8")
+def text_of(content: str) -> Callable[[Path], object]:
+    """A writer of ``content`` as UTF-8 text, for :func:`common.files.atomic_write`."""
+    return lambda p: p.write_text(content, encoding="utf-8")
 
 
 def rounded(trait: str, v: float) -> float | int | None:
@@ -56,7 +57,7 @@ def rounded(trait: str, v: float) -> float | int | None:
     return round(v, DECIMALS.get(TRAITS[trait], 4))
 
 
-def _cell(trait: str, v: float) -> str:
+def cell(trait: str, v: float) -> str:
     r = rounded(trait, v)
     if r is None:
         return ""
@@ -83,7 +84,7 @@ def wide_csv(table: TraitTable) -> str:
         w.writerow(
             [
                 *("" if b[k] is None else b[k] for k in BOOK),
-                *(_cell(n, float(v)) for n, v in zip(NAMES, vals, strict=True)),
+                *(cell(n, float(v)) for n, v in zip(NAMES, vals, strict=True)),
                 q,
                 table.date,
             ]
@@ -98,7 +99,7 @@ def long_csv(table: TraitTable) -> str:
     methods = {n: table.definition.method(n) for n in NAMES}
     for r, vals in zip(table.records, table.values, strict=True):
         for n, v in zip(NAMES, vals, strict=True):
-            w.writerow([r.plot, n, _cell(n, float(v)), TRAITS[n], table.date, methods[n]])
+            w.writerow([r.plot, n, cell(n, float(v)), TRAITS[n], table.date, methods[n]])
     return buf.getvalue()
 
 
@@ -168,7 +169,7 @@ def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
         "traits.geojson": json.dumps(geojson(rt), indent=1, allow_nan=False),
     }
     for name, text in files.items():
-        atomic_write(out / name, _text(text))
+        atomic_write(out / name, text_of(text))
     names = list(files)
     if cfg.figures:
         from services.traits.fieldmap import draw
@@ -180,16 +181,16 @@ def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
     h2 = None
     if breeding.has_entries(t):
         h2 = breeding.heritabilities(t)
-        atomic_write(out / "entries.csv", _text(breeding.entries_csv(t)))
-        atomic_write(out / "heritability.csv", _text(breeding.heritability_csv(h2)))
+        atomic_write(out / "entries.csv", text_of(breeding.entries_csv(t)))
+        atomic_write(out / "heritability.csv", text_of(breeding.heritability_csv(h2)))
         names += ["entries.csv", "heritability.csv"]
-    atomic_write(out / "traits.md", _text(breeding.report(rt, h2)))
+    atomic_write(out / "traits.md", text_of(breeding.report(rt, h2)))
     names.append("traits.md")
     if rt.crop is not None:  # what `phenorover plan --from-survey` plans on
         from common.cropmodel import write as write_crop
 
         write_crop(out / "crop.json", rt.crop)
         names.append("crop.json")
-    atomic_write(out / "traits.toml", _text(options_toml(rt, cfg)))
+    atomic_write(out / "traits.toml", text_of(options_toml(rt, cfg)))
     names.append("traits.toml")
     return names

@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from common.canopy import TRAITS
-from services.traits.compute import NAMES, TraitTable
-from services.traits.outputs import BOOK, _cell, _text, atomic_write, book
+from common.files import atomic_write
+from services.traits.compute import NAMES
+from services.traits.outputs import BOOK, book, cell, text_of
 from services.traits.series import Season
 from services.traits.stats import Heritability, heritability
 
@@ -51,9 +52,9 @@ def season_csv(s: Season) -> str:
                     *("" if b[k] is None else b[k] for k in BOOK),
                     rt.date,
                     f"{s.days[d]:g}",
-                    *(_cell(n, float(v)) for n, v in zip(NAMES, vals, strict=True)),
+                    *(cell(n, float(v)) for n, v in zip(NAMES, vals, strict=True)),
                     q,
-                    _cell("height", g),
+                    cell("height", g),
                     "" if not math.isfinite(rate) else f"{rate:.5f}",
                 ]
             )
@@ -72,12 +73,11 @@ def fits_csv(s: Season) -> str:
     return buf.getvalue()
 
 
-def _height_h2(t: TraitTable) -> Heritability:
-    """Heritability of height on one date (the other traits' are in each run's
-    heritability.csv)."""
-    ok = np.array([q == "ok" for q in t.quality])
-    values = np.where(ok, t.column("height"), np.nan)
-    return heritability([r.entry for r in t.records], [r.rep for r in t.records], values)
+def _height_h2(s: Season, d: int) -> Heritability:
+    """Heritability of height on date ``d`` over the plots flagged ok (``s.height``
+    holds only those); the other traits' are in each run's heritability.csv."""
+    recs = s.runs[d].table.records
+    return heritability([r.entry for r in recs], [r.rep for r in recs], s.height[d])
 
 
 def report(s: Season) -> str:
@@ -104,7 +104,7 @@ def report(s: Season) -> str:
             if off is None or off.plane is None
             else (f"{off.plane[1] * 1000:+.2f}, {off.plane[2] * 1000:+.2f}")
         )
-        h2 = _height_h2(rt.table) if any(r.entry for r in rt.records) else None
+        h2 = _height_h2(s, d) if any(r.entry for r in rt.records) else None
         h2s = "" if h2 is None or not h2.ok else f"{h2.h2_mean:.3f}"
         ok = rt.table.quality.count("ok")
         lines.append(
@@ -130,7 +130,7 @@ def write_season(s: Season, out: Path, figures: bool = True) -> list[str]:
     if s.fits:
         files["growth_fits.csv"] = fits_csv(s)
     for name, text in files.items():
-        atomic_write(out / name, _text(text))
+        atomic_write(out / name, text_of(text))
     names = list(files)
     if figures:
         from services.traits.growth_figure import growth_figure

@@ -119,7 +119,8 @@ def _cli_time(runs: list[Path]) -> float:
     """Wall seconds of ``python -m services.traits RUNS...`` as a user runs it."""
     cmd = [sys.executable, "-m", "services.traits", *map(str, runs)]
     t = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True)
+    # ten times the season's target: a command that hangs fails the experiment
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=10 * fig.TARGETS["season_s"])
     took = time.perf_counter() - t
     if r.returncode != 0:
         raise RuntimeError(f"phenorover traits exited {r.returncode}: {r.stderr.strip()[-300:]}")

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from common.canopy import TRAITS
+from common.cropmodel import assign_plots
 from common.field import load_field
 from common.messages.core import Array
 from common.messages.plan import PlanResult
-from services.traits.compute import NAMES, NO_POINTS, OCCLUDED, OK, compute_run, plot_of
+from services.traits.compute import NAMES, NO_POINTS, OCCLUDED, OK, compute_run
 from services.traits.config import GroundConfig
 from services.traits.ground import GroundModel, fit_ground, lowest_per_cell
 from services.traits.run import RunError, load_run, survey_date
@@ -27,12 +28,12 @@ from tests.traits.conftest import (
 )
 
 
-def test_plot_of_matches_a_box_by_box_check() -> None:
+def test_assign_plots_matches_a_box_by_box_check() -> None:
     field = load_field(TINY)[1]
     rng = np.random.default_rng(1)
     b = field.bounds
     xy = rng.uniform(b[:2] - 0.5, b[2:] + 0.5, (20_000, 2))
-    got = plot_of(xy, field.plot_boxes, field.plot_row, field.plot_col)
+    got = assign_plots(xy, field.plot_boxes, field.plot_row, field.plot_col, 0.0)
     want = np.full(len(xy), -1)
     for k, (x0, y0, _, x1, y1, _) in enumerate(field.plot_boxes):
         inside = (xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)
