@@ -54,6 +54,16 @@ TRAITS: dict[str, str] = {
     "points": "1",
     "seen": "1",
 }
+# traits.csv's field-book columns, first (services/traits writes the file, the
+# dashboard and the evaluation read it)
+BOOK_COLUMNS = ("plot", "row", "column", "rep", "entry")
+
+
+def column(trait: str) -> str:
+    """The traits files' column of ``trait``, its unit in the header: ``height (m)``."""
+    return f"{trait} ({TRAITS[trait]})"
+
+
 Cell = Annotated[float, msgspec.Meta(ge=0.005, le=1.0)]
 
 

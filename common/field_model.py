@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
-import stat
 from pathlib import Path
 from typing import Annotated, Literal
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
+
+from common.files import read_regular
 
 # Every float finite by schema (NaN and inf fail a two-sided bound): these configs
 # travel nested in plans. Lengths in metres, at most 10 km.
@@ -194,17 +195,11 @@ class Field:
 
 
 def read_bounded(path: Path, what: str) -> bytes:
-    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES` (a FIFO or
-    /dev/zero would never end); FieldError naming ``path`` and, for a file too large,
-    ``what`` it is (``a field file``)."""
+    """The bytes of a regular file of at most :data:`MAX_FILE_BYTES`
+    (:func:`common.files.read_regular`); FieldError naming ``path``."""
     try:
-        st = path.stat()
-        if not stat.S_ISREG(st.st_mode):
-            raise FieldError(f"{path}: not a regular file")
-        if st.st_size > MAX_FILE_BYTES:
-            raise FieldError(
-                f"{path}: {st.st_size:,} bytes, more than the {MAX_FILE_BYTES:,} {what} may have"
-            )
-        return path.read_bytes()
+        return read_regular(path, MAX_FILE_BYTES, what)
+    except ValueError as exc:
+        raise FieldError(str(exc)) from None
     except OSError as exc:
         raise FieldError(f"{path}: cannot read: {exc.strerror}") from None

@@ -1,8 +1,9 @@
-"""Writing a file whole or not at all."""
+"""Writing a file whole or not at all, and reading one of bounded size."""
 
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,3 +19,15 @@ def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def read_regular(path: Path, limit: int, what: str) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes: a FIFO or /dev/zero
+    would never end, and a huge file would fill the memory. Raises ValueError (one
+    line naming ``path`` and, for a file too large, ``what`` it is) and OSError."""
+    st = path.stat()
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{path}: not a regular file")
+    if st.st_size > limit:
+        raise ValueError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} {what} may have")
+    return path.read_bytes()

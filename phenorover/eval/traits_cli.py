@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from common.canopy import TRAITS
+from common.canopy import TRAITS, column
 from common.files import atomic_write
 
 SCORED = ("height", "height_max", "cover", "volume_voxel", "volume_hull")
@@ -44,7 +44,7 @@ def _read_traits(path: Path) -> list[dict[str, str]]:
             rows = list(csv.DictReader(f))
     except OSError as exc:
         raise EvalError(f"{path}: cannot read: {exc.strerror} (run `phenorover traits`)") from None
-    need = {"plot", "quality", "date", *(f"{t} ({TRAITS[t]})" for t in SCORED)}
+    need = {"plot", "quality", "date", *(column(t) for t in SCORED)}
     if not rows or not need <= set(rows[0]):
         raise EvalError(f"{path}: not a traits.csv (columns {sorted(need)})")
     return rows
@@ -89,7 +89,7 @@ def evaluate(run_dir: Path, truth_path: Path) -> dict[str, Any]:
     ok = np.array([r["quality"] == "ok" for r in rows])
     out: dict[str, Any] = {"date": date, "field": truth.get("field"), "plots_ok": int(ok.sum())}
     for t in SCORED:
-        m = np.array([_num(r[f"{t} ({TRAITS[t]})"]) for r in rows])
+        m = np.array([_num(r[column(t)]) for r in rows])
         v = np.array([_num(by_id[r["plot"]].get(t)) for r in rows])
         out[t] = error(m, v, ok).__dict__
     return out

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.canopy import TRAITS
+from common.canopy import column
 from services.traits.compute import OK, RunTraits
 
 # beyond this many plots the ids would overlap into a grey smear
@@ -40,7 +40,7 @@ def draw(rt: RunTraits, path: Path, trait: str = "height") -> None:
             lo, hi = float(vals[finite].min()), float(vals[finite].max())
             coll.set_clim(lo, hi if hi > lo else lo + 1e-3)
         ax.add_collection(coll)
-        fig.colorbar(coll, ax=ax, label=f"{trait} ({TRAITS[trait]})", shrink=0.8)
+        fig.colorbar(coll, ax=ax, label=column(trait), shrink=0.8)
         flagged = [r for r, q in zip(boxes, rt.table.quality, strict=True) if q != OK]
         for x0, y0, _, x1, y1, _ in flagged:
             ax.add_patch(

@@ -30,14 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from common.canopy import TRAITS
+from common.canopy import BOOK_COLUMNS, TRAITS, column
 from common.config import dump_toml
 from common.files import atomic_write
 from services.traits.compute import NAMES, RunTraits, TraitTable
 from services.traits.config import TraitsConfig
 from services.traits.run import Record
 
-BOOK = ("plot", "row", "column", "rep", "entry")
+BOOK = BOOK_COLUMNS
 # decimals per unit: mm for heights, 0.1 L for volumes, 0.001 for shares
 DECIMALS = {"m": 3, "m3": 4, "1": 3}
 COUNTS = ("points",)
@@ -72,7 +72,7 @@ def book(r: Record) -> dict[str, Any]:
 
 
 def header() -> list[str]:
-    return [*BOOK, *(f"{n} ({TRAITS[n]})" for n in NAMES), "quality", "date"]
+    return [*BOOK, *(column(n) for n in NAMES), "quality", "date"]
 
 
 def wide_csv(table: TraitTable) -> str:

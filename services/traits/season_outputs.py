@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.canopy import TRAITS
+from common.canopy import column
 from common.files import atomic_write
 from services.traits.compute import NAMES
 from services.traits.outputs import BOOK, book, cell, text_of
@@ -35,7 +35,7 @@ def season_csv(s: Season) -> str:
             *BOOK,
             "date",
             "days_after_planting (d)",
-            *(f"{n} ({TRAITS[n]})" for n in NAMES),
+            *(column(n) for n in NAMES),
             "quality",
             "height_growth (m)",
             "height_growth_rate (m/d)",

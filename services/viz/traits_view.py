@@ -28,8 +28,9 @@ import numpy as np
 import numpy.typing as npt
 import rerun as rr
 
-from common.canopy import TRAITS
+from common.canopy import BOOK_COLUMNS, TRAITS, column
 from common.field import Field
+from common.files import read_regular
 from common.messages.mission import MissionPhase, MissionState
 from services.viz.config import VizConfig
 from services.viz.scene import GREY, Entry
@@ -37,7 +38,7 @@ from services.viz.scene import GREY, Entry
 F64 = npt.NDArray[np.float64]
 U8 = npt.NDArray[np.uint8]
 
-FIXED = ("plot", "row", "column", "rep", "entry")
+FIXED = BOOK_COLUMNS
 MAX_BYTES = 32 * 1024 * 1024  # ~1.5 kB a plot at the field's 20 000-plot limit
 FLAT = 0.02  # m, the slab drawn for a plot without a measured height
 SETTLE_S = 1.0  # a file changed this recently may still be being written
@@ -46,11 +47,6 @@ NOT_MEASURED = ("", "nan")
 
 class TraitsError(ValueError):
     """A traits file that cannot be drawn; the message is one line naming it."""
-
-
-def header(trait: str) -> str:
-    """The traits file's column of ``trait``: ``height (m)``."""
-    return f"{trait} ({TRAITS[trait]})"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,7 +120,7 @@ def parse(text: str, name: str) -> list[TraitRow]:
         if len(cells) != len(head):
             raise TraitsError(f"{where}: {len(cells)} cells, the header has {len(head)}")
         cell = {h: cells[i].strip() for h, i in col.items()}
-        values = {t: _number(cell[header(t)], header(t), where) for t in TRAITS if header(t) in col}
+        values = {t: _number(cell[column(t)], column(t), where) for t in TRAITS if column(t) in col}
         rows.append(
             TraitRow(
                 line=n,
@@ -145,10 +141,8 @@ def parse(text: str, name: str) -> list[TraitRow]:
 def read(path: Path) -> list[TraitRow]:
     """:func:`parse` of the file at ``path``; raises TraitsError."""
     try:
-        if path.stat().st_size > MAX_BYTES:
-            raise TraitsError(f"{path}: larger than {MAX_BYTES // 2**20} MiB")
-        text = path.read_bytes().decode("utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = read_regular(path, MAX_BYTES, "a traits file").decode("utf-8-sig")
+    except (OSError, ValueError) as exc:  # UnicodeDecodeError is a ValueError
         raise TraitsError(f"{path}: cannot read: {exc}") from None
     return parse(text, str(path))
 

@@ -16,13 +16,14 @@ import pytest
 from common.canopy import TRAITS
 from common.field import Field, FieldLayout, build_field
 from common.messages.mission import MissionPhase, MissionState
+from services.traits.outputs import header
 from services.viz import traits_view as tv
 from services.viz.config import VizConfig
 from services.viz.scene import GREY, Entry
 from tests.conftest import REPO
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
-HEADER = ["plot", "row", "column", "rep", "entry", *map(tv.header, TRAITS), "quality", "date"]
+HEADER = header()  # the traits writer's own header
 GREY_RGBA = [*GREY, 255]
 
 
