@@ -8,9 +8,10 @@ import dataclasses
 import re
 from collections.abc import Callable
 
+from common.process import strip_ansi
+
 # Zenoh's access control logs through this target: one trace line per message checked
 LOG_TARGET = "zenoh::net::routing::interceptor::access_control"
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _VERDICT = re.compile(
     r"(?P<zid>[0-9a-f]+) on (?P<subject>\S+) is (?P<verdict>un)?authorized to "
     r"(?P<action>.+?) \((?P<flow>ingress|egress)\) on (?P<key>\S+)"
@@ -36,7 +37,7 @@ class Denial:
 
 def parse_denial(line: str) -> Denial | None:
     """The denial a line of Zenoh's access-control log reports, if it reports one."""
-    line = _ANSI.sub("", line)
+    line = strip_ansi(line)
     m = _VERDICT.search(line)
     if m is not None:
         if not m["verdict"]:

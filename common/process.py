@@ -4,6 +4,7 @@ children that die with their parent."""
 from __future__ import annotations
 
 import ctypes
+import re
 import signal
 import socket
 
@@ -24,3 +25,12 @@ def die_with_parent() -> None:
     leaves no orphans (Linux prctl PR_SET_PDEATHSIG)."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def strip_ansi(line: str) -> str:
+    """A child process's output line without its terminal colours (zenohd's and
+    rerun's logs colour their levels)."""
+    return _ANSI.sub("", line)

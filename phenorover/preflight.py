@@ -159,6 +159,6 @@ def preflight(path: Path, field: str | None = None) -> tuple[Manifest, list[str]
         manifest = msgspec.structs.replace(manifest, field=field)
     robot = check_robot(manifest, path)
     deployed = check_field(manifest, path)
-    for _, problem in service_problems(manifest, robot, deployed):
-        raise ConfigError(f"{path}: {problem}")
+    if problems := service_problems(manifest, robot, deployed):
+        raise ConfigError(f"{path}: {problems[0][1]}")
     return manifest, [deployed.note] if deployed is not None and deployed.note else []

@@ -1,12 +1,14 @@
 """Which of the launcher's services hang: alive as processes, silent on the bus.
 
-A service that dies is seen by its exit; one that hangs (a deadlock, a process stopped
-by SIGSTOP, a machine swapping to death) keeps its process and, for as long as Zenoh's
+A service that dies is seen by its exit; one whose whole process stops (SIGSTOP, a
+machine swapping to death) keeps its process and, for as long as Zenoh's
 lease lets it (10 s), its liveliness token too, so nothing on the bus would say so.
 Every service publishes a heartbeat once a second from its own thread
 (``health/<service>``, :mod:`common.service`); the launcher hears them on its router
 and takes a service whose heartbeat has been silent for ``hung_after_s`` for hung, as
-systemd's ``WatchdogSec`` does. A service is judged only once it has been heard: its
+systemd's ``WatchdogSec`` does. The heartbeat's own thread beats on through a deadlock
+of the service's main loop: that is caught by its peers, which judge every feed by
+the age of what it last said (docs/faults.md). A service is judged only once it has been heard: its
 start-up (numba compiles, a snapshot loaded) is not a hang.
 """
 

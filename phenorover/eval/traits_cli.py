@@ -24,6 +24,7 @@ import numpy as np
 
 from common.canopy import TRAITS, column
 from common.files import atomic_write
+from services.sim.truth_file import PLANTS_TRUTH
 
 SCORED = ("height", "height_max", "cover", "volume_voxel", "volume_hull")
 UNIT_SCALE = {"m": (100.0, "cm"), "1": (100.0, "%"), "m3": (1000.0, "L")}
@@ -96,7 +97,7 @@ def evaluate(run_dir: Path, truth_path: Path) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    truth = args.truth or args.run_dir.resolve().parent / "sim" / "plants.truth.json"
+    truth = args.truth or args.run_dir.resolve().parent / "sim" / PLANTS_TRUTH
     try:
         res = evaluate(args.run_dir, truth)
     except EvalError as exc:

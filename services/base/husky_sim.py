@@ -64,7 +64,9 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"`` and ``imu =
     "sensors/imu_0/data"`` plays Clearpath's ROS 2 Jazzy platform, which also refuses a
     stamped command older than ``cmd_vel_timeout_s`` by its own clock
-    (diff_drive_controller's ``cmd_vel_timeout``, 0.5 s) and takes a zero stamp as now."""
+    (diff_drive_controller's ``cmd_vel_timeout``: its default, 0.5 s, here; Clearpath's
+    husky_control sets 0.25 s, the figure docs/devices.md gives for the wheels' stop)
+    and takes a zero stamp as now."""
 
     domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
     namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"

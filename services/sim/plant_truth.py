@@ -17,8 +17,10 @@ field frame, m), to judge a plan made from a survey.
 from __future__ import annotations
 
 import math
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
+import msgspec
 import numpy as np
 import numpy.typing as npt
 
@@ -26,8 +28,13 @@ from common import fieldbook
 from common.canopy import CanopyDefinition, plot_traits
 from common.field import Field, FieldLayout
 from services.sim.foliage import Foliage
+from services.sim.storage import write_atomic
 from services.sim.terrain import Terrain
 from services.sim.trial import PlotPlan, TrialPlan
+from services.sim.truth_file import PLANTS_TRUTH, PlantTruth
+
+if TYPE_CHECKING:
+    from services.sim.world import World
 
 # traits that describe a survey's view, not the plants
 _SURVEY_ONLY = ("points", "seen")
@@ -117,3 +124,28 @@ def _extent(pts: F64, voxel: float) -> dict[str, float]:
     lo, hi = pts.min(axis=0) - voxel / 2, pts.max(axis=0) + voxel / 2
     vals = (lo[0], lo[1], hi[0], hi[1], hi[2])
     return {k: float(v) for k, v in zip(names, vals, strict=True)}
+
+
+def plant_truth_of(world: World, definition: CanopyDefinition | None = None) -> PlantTruth:
+    """The plants' truth of ``world``."""
+    d = definition or CanopyDefinition()
+    w, plan = world, world.trial
+    return PlantTruth(
+        field=w.field.name,
+        seed=w.cfg.seed,
+        date=w.cfg.trial.date,
+        planting_date=w.layout.planting_date,
+        days_after_planting=None if plan is None else plan.days,
+        trial=w.cfg.trial,
+        definition=d,
+        plots=plant_truth(w.layout, w.field, w.terrain, w.foliage, plan, d),
+    )
+
+
+def write_plant_truth(folder: Path, world: World) -> Path:
+    """Write ``world``'s plant truth as ``folder/`` :data:`PLANTS_TRUTH`, whole or not at
+    all; returns its path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / PLANTS_TRUTH
+    write_atomic(path, msgspec.json.encode(plant_truth_of(world)))
+    return path

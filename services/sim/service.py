@@ -42,10 +42,11 @@ from services.sim.config import SimConfig
 from services.sim.faults import FaultSchedule, describe
 from services.sim.imu import ImuModel
 from services.sim.lidar import beam_angles
+from services.sim.plant_truth import write_plant_truth
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, confine
-from services.sim.truth_file import scan_truth, write_plant_truth, write_truth
+from services.sim.truth_file import scan_truth, write_truth
 from services.sim.world import World
 
 

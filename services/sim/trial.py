@@ -7,8 +7,8 @@ environmental noise, some planted positions fail to emerge (in runs, so rows get
 and a few plants lean across the row into a lane. With a survey ``date`` the plants
 are grown to it along a logistic curve in days after the layout's ``planting_date``;
 without one they are at their full (mature) size. A field with no entries and no date
-is grown exactly as before (:func:`plan_trial` returns None): the calibrated ENGR and
-SPL worlds do not move.
+is no trial (:func:`plan_trial` returns None): its plots grow the foliage
+generator's uniform plants, as the calibrated ENGR and SPL worlds do.
 
 Randomness is keyed so nothing depends on what else is in the field: an entry's
 effects come from (world seed, entry name), a plot's noise, gaps, leans and plant
@@ -196,9 +196,10 @@ def _plot_rng(seed: int, p: int, aspect: int) -> np.random.Generator:
 def plan_trial(
     layout: FieldLayout, field: Field, foliage: FoliageConfig, cfg: TrialConfig, seed: int
 ) -> TrialPlan | None:
-    """Every plot's plan, or None for a field grown as before (no entries in its book,
-    ``vary`` off and no date). A dated field without entries grows the unvaried plants
-    (``foliage``'s height range, no effects, gaps or leans) to the date. ValueError
+    """Every plot's plan, or None for a field that is no trial (no entries in its book,
+    ``vary`` off and no date: the foliage generator's uniform plants). A dated field
+    without entries grows the unvaried plants (``foliage``'s height range, no
+    effects, gaps or leans) to the date. ValueError
     (one line) on a bad date; FieldError when the book does not match the field."""
     days = days_after_planting(cfg, layout.planting_date)
     recs = fieldbook.records(layout, field)

@@ -19,20 +19,16 @@ from __future__ import annotations
 
 import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
 from common.canopy import CanopyDefinition
-from services.sim.plant_truth import plant_truth
 from services.sim.robot import RobotState
 from services.sim.storage import write_atomic
 from services.sim.trial import TrialConfig
-
-if TYPE_CHECKING:
-    from services.sim.world import World
 
 PLANTS_TRUTH = "plants.truth.json"
 
@@ -94,28 +90,3 @@ class PlantTruth(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     trial: TrialConfig
     definition: CanopyDefinition
     plots: list[dict[str, Any]]
-
-
-def plant_truth_of(world: World, definition: CanopyDefinition | None = None) -> PlantTruth:
-    """The plants' truth of ``world``."""
-    d = definition or CanopyDefinition()
-    w, plan = world, world.trial
-    return PlantTruth(
-        field=w.field.name,
-        seed=w.cfg.seed,
-        date=w.cfg.trial.date,
-        planting_date=w.layout.planting_date,
-        days_after_planting=None if plan is None else plan.days,
-        trial=w.cfg.trial,
-        definition=d,
-        plots=plant_truth(w.layout, w.field, w.terrain, w.foliage, plan, d),
-    )
-
-
-def write_plant_truth(folder: Path, world: World) -> Path:
-    """Write ``world``'s plant truth as ``folder/plants.truth.json``, whole or not at
-    all; returns its path."""
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / PLANTS_TRUTH
-    write_atomic(path, msgspec.json.encode(plant_truth_of(world)))
-    return path

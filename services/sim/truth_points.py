@@ -1,6 +1,6 @@
 """A dense, deterministic sample of every true surface of the simulated world, for
-scoring registrations cloud-to-truth (evaluation only; moved out of
-:mod:`services.sim.world`, which builds the world)."""
+scoring registrations cloud-to-truth (evaluation only; :mod:`services.sim.world`
+builds the world)."""
 
 from __future__ import annotations
 

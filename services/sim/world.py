@@ -149,7 +149,9 @@ class World:
         # the GNSS antennas' sky: each plot's canopy top stands on the ground at its centre
         canopy = field.plot_boxes.copy()
         if self.trial is not None:  # a trial's crop is as tall as its tallest plant
-            tallest = [float(p.growth.heights.max()) for p in self.trial.plots]
+            tallest = [
+                float(p.growth.heights[p.growth.emerged].max(initial=0.0)) for p in self.trial.plots
+            ]
             canopy[:, 5] = np.minimum(canopy[:, 5], canopy[:, 2] + np.array(tallest))
         centre = canopy[:, [0, 1]] / 2 + canopy[:, [3, 4]] / 2
         canopy[:, 5] += self.terrain.height(centre[:, 0], centre[:, 1])

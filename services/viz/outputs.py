@@ -18,7 +18,6 @@ import contextlib
 import importlib.util
 import logging
 import os
-import re
 import socket
 import subprocess
 import tempfile
@@ -30,7 +29,7 @@ from urllib.parse import quote
 
 import rerun as rr
 
-from common.process import die_with_parent
+from common.process import die_with_parent, strip_ansi
 from services.viz.config import VizConfig
 from services.viz.scene import Entry, blueprint
 
@@ -38,7 +37,6 @@ APP_ID = "phenorover"
 TIMELINE = "time"
 # where this machine's own processes reach a server bound to a wildcard address
 LOCAL = {"0.0.0.0": "127.0.0.1", "::": "::1"}
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 log = logging.getLogger("viz")
 
@@ -117,7 +115,7 @@ class WebViewer:
     def _read(self) -> None:
         assert self.proc.stderr is not None
         for raw in self.proc.stderr:
-            line = _ANSI.sub("", raw.decode(errors="replace")).strip()
+            line = strip_ansi(raw.decode(errors="replace")).strip()
             if line:
                 self._said.append(line)
                 log.warning("viz: web viewer: %s", line)

@@ -148,7 +148,7 @@ def test_geojson_entries_without_plot_ids_and_plots_without_properties(tmp_path:
     assert sorted(fieldbook.entries(layout, fld)) == [f"E{k}" for k in range(6)]
     layout, _ = load_field(_geojson(tmp_path, [{"height": 1.0}] * 6))
     assert layout.field_book == ()
-    shipped, fld = load_field("example_plots")  # its plot properties are now a book
+    shipped, fld = load_field("example_plots")  # its plot properties make a book
     assert [r.plot for r in fieldbook.records(shipped, fld)][:2] == ["P01", "P02"]
 
 

@@ -16,11 +16,11 @@ import pytest
 from common.field import Field, FieldLayout, build_field, load_field
 from common.field_model import PlotRecord
 from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
-from services.sim.plant_truth import plant_truth
+from services.sim.plant_truth import plant_truth, write_plant_truth
 from services.sim.targets import TargetConfig
 from services.sim.terrain import Terrain, TerrainConfig, build_terrain
 from services.sim.trial import TrialConfig, TrialPlan, entry_effects, growth, plan_trial
-from services.sim.truth_file import PLANTS_TRUTH, write_plant_truth
+from services.sim.truth_file import PLANTS_TRUTH
 from services.sim.world import World, WorldConfig
 
 # sha256 of World(*load_field(name)).foliage.occ, taken on the code before trials
