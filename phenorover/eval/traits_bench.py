@@ -63,11 +63,9 @@ def _fig(bench: Bench, name: str, values: list[float], unit: str, **kw: Any) -> 
 def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
     """The accuracy figures, each the mean over the seeds with their spread."""
     close = {
-        "height": "a view of the canopy's top: once the crop outgrows the 1 m scanner "
-        "(91 days) it sees the sides of each plot's top, not its tallest tips (heights "
-        "fall short, bias below); finer simulated leaves do not close it (tried with "
-        "--foliage-voxel 0.02); a scanner raised above the crop, or scan locations "
-        "along the lanes, would",
+        "height": "a view of the canopy's top: once the crop outgrows the 1 m scanner it "
+        "sees the sides of each plot's top, not its tallest tips (heights fall short, "
+        "bias below); a scanner raised above the crop, or scan locations along the lanes",
         "cover": "scan locations that see each plot from both lanes",
         "volume": "voxel occupancy counts only the surfaces the scanner saw: the far side "
         "and inside of plots seen from their ends or one lane are missing; scan "
@@ -164,28 +162,40 @@ def record_times(bench: Bench, one: float | None, five: float | None, why: str =
 def record_plan(
     bench: Bench, cmp: dict[str, Any] | None, nominal: Any, measured: Any, why: str = ""
 ) -> None:
-    """Planning from the survey against planning on the nominal boxes: the true foliage
-    cells each plan's scans see, with their locations and tour lengths beside."""
+    """The next survey planned on the crop a survey measured (70 days after planting)
+    against the plan on the nominal boxes, both scored in the world of the next
+    survey (91 days): the true foliage cells each plan's scans see, and what each plan
+    spends for it (its locations and tour), side by side."""
     base = None if cmp is None else 100 * cmp["nominal"]["share"]
     for name, plan in (("nominal", nominal), ("measured", measured)):
         c = None if cmp is None else cmp[name]
-        note = ""
-        if cmp is not None and c is not None:
-            note = (
-                f"{c['cells_seen']} of {cmp['cells_total']} true cells from "
-                f"{c['locations']} locations, tour {plan.tour.length:.1f} m"
-            )
+        where = f"plan on the {name} boxes" + (" (crop of 70 days)" if name == "measured" else "")
         goal = None
         if name == "measured" and base is not None:
             goal = Goal(">=", base, "more scan locations where the measured crop is hidden")
+        missing = why or "not measured"
         bench.figure(
-            f"true foliage cells seen, plan on the {name} boxes",
+            f"true foliage cells seen at 91 days, {where}",
             None if c is None else 100 * c["share"],
             "%",
-            note=note,
-            missing=why or "not measured",
+            note=""
+            if c is None or cmp is None
+            else (f"{c['cells_seen']} of {cmp['cells_total']} true cells"),
+            missing=missing,
             goal=goal,
             headline=name == "measured",
+        )
+        bench.figure(
+            f"scan locations, {where}",
+            None if c is None else float(c["locations"]),
+            "",
+            missing=missing,
+        )
+        bench.figure(
+            f"tour length, {where}",
+            None if plan is None else float(plan.tour.length),
+            "m",
+            missing=missing,
         )
 
 

@@ -68,6 +68,24 @@ def _num(v: str | float | None) -> float:
         return math.nan
 
 
+def _same_definition(options: Path, truth: dict[str, Any], truth_path: Path) -> None:
+    """The traits and the truth must follow one definition (``traits.toml``, the
+    options the traits ran with; absent: not checked)."""
+    import tomllib
+
+    if not options.is_file():
+        return
+    try:
+        ran = tomllib.loads(options.read_text(encoding="utf-8")).get("definition")
+    except (OSError, ValueError) as exc:
+        raise EvalError(f"{options}: cannot read: {exc}") from None
+    if ran is not None and ran != truth.get("definition"):
+        raise EvalError(
+            f"{options}: the traits' definition {ran} is not the truth's "
+            f"{truth.get('definition')} ({truth_path}): not the same measure"
+        )
+
+
 def evaluate(run_dir: Path, truth_path: Path) -> dict[str, Any]:
     """Each scored trait's errors; raises EvalError."""
     from phenorover.eval.traits import error
@@ -80,6 +98,7 @@ def evaluate(run_dir: Path, truth_path: Path) -> dict[str, Any]:
             f"{truth_path}: the plants of {truth.get('date') or 'the mature stage'}, the "
             f"traits of {date or 'an unknown date'}: not the same survey"
         )
+    _same_definition(run_dir / "traits.toml", truth, truth_path)
     by_id = {str(p["plot_id"]): p for p in truth["plots"]}
     missing = [r["plot"] for r in rows if r["plot"] not in by_id]
     if missing or len(by_id) != len(rows):

@@ -177,7 +177,7 @@ def main() -> int:
             print(ev.describe(score))
             if not season_runs:
                 season_runs = [rt.run_dir for rt, _ in dates]
-                _plan_experiment(bench, seed, dates[-1][0], pr, out)
+                _plan_experiment(bench, seed, dates[0][0], DATES[-1], pr, out)
         fig.record_scores(bench, by_seed)
         if not args.no_timings:
             _timings(bench, args, season_runs, xy, pr, runs, out)
@@ -186,10 +186,17 @@ def main() -> int:
 
 
 def _plan_experiment(
-    bench: Bench, seed: int, rt: RunTraits, pr: PlanResult, out: dict[str, Any]
+    bench: Bench,
+    seed: int,
+    rt: RunTraits,
+    then: datetime.date,
+    pr: PlanResult,
+    out: dict[str, Any],
 ) -> None:
-    """The next survey planned on the crop as this one measured it, against the plan
-    on the nominal boxes: the true foliage cells each plan's scans see (0.5 deg)."""
+    """The next survey (on ``then``) planned on the crop as this one (``rt``) measured
+    it, against the plan on the nominal boxes: the true foliage cells each plan's
+    scans see (0.5 deg) in the world of the next survey, with each plan's locations
+    and tour beside them (the measured crop may need more of them)."""
     from phenorover.eval.plan_survey import compare_plans, locations
     from services.planner.measured import plan_measured
 
@@ -199,7 +206,7 @@ def _plan_experiment(
         world = World(
             layout,
             field,
-            world_config(seed, datetime.date.fromisoformat(rt.date)),
+            world_config(seed, then),
         )
         mp = plan_measured(layout, field, rt.crop)
         cmp = compare_plans(world, locations(pr), locations(mp))

@@ -59,3 +59,19 @@ def test_a_truth_of_another_date_is_one_line(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not the same survey" in err[0]
     assert not (run / "eval_traits.json").exists()
+
+
+def test_traits_of_another_definition_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = _run(tmp_path)
+    truth = tmp_path / "runs" / "sim" / "plants.truth.json"
+    t = json.loads(truth.read_text())
+    t["definition"] = {"cell": 0.05, "voxel": 0.1, "min_height": 0.05, "height_percentile": 99.0}
+    truth.write_text(json.dumps(t))
+    (run / "traits.toml").write_text(
+        "[definition]\ncell = 0.05\nvoxel = 0.1\nmin_height = 0.05\nheight_percentile = 95.0\n"
+    )
+    assert main(["eval", "traits", str(run)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not the same measure" in err[0]
