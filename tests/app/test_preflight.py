@@ -24,40 +24,42 @@ NO_ORIGIN = REPO / "tests" / "data" / "no_origin.toml"
 ANTENNAS = '[{ id = 1, host = "127.0.0.1", tcp_port = 9001 }, { id = 2, host = "127.0.0.1" }]'
 
 
-def hardware(tmp: Path, field: Path = NO_ORIGIN, extra: str = "") -> Path:
-    """A robot's manifest (wall clock, hardware backends) on loopback."""
-    m = tmp / "robot.toml"
-    m.write_text(f"""machine = "robot"
-clock = "wall"
-field = "{field}"
-run_dir = "{tmp / "runs"}"
-[zenoh]
-listen = ["tcp/127.0.0.1:{free_port()}"]
-[services.gnss]
+HARDWARE = f"""[services.gnss]
 backend = "nmea-tcp"
 antennas = {ANTENNAS}
 [services.nav]
 [services.mission]
-{extra}""")
-    return m
-
-
-def simulated(tmp: Path, extra: str = "") -> Path:
-    m = tmp / "sim.toml"
-    m.write_text(f"""machine = "sim"
-clock = "sim"
-field = "engr"
-run_dir = "{tmp / "runs"}"
-[zenoh]
-listen = ["tcp/127.0.0.1:{free_port()}"]
-[services.sim]
+"""
+SIMULATED = """[services.sim]
 [services.gnss]
 backend = "sim"
 [services.nav]
 [services.planner]
 [services.viz]
-{extra}""")
+"""
+
+
+def manifest(tmp: Path, machine: str, clock: str, field: Path | str, services: str) -> Path:
+    """``tmp/<machine>.toml`` on loopback, its run folder in ``tmp``."""
+    m = tmp / f"{machine}.toml"
+    m.write_text(f"""machine = "{machine}"
+clock = "{clock}"
+field = "{field}"
+run_dir = "{tmp / "runs"}"
+[zenoh]
+listen = ["tcp/127.0.0.1:{free_port()}"]
+{services}""")
     return m
+
+
+def hardware(tmp: Path, field: Path = NO_ORIGIN, extra: str = "") -> Path:
+    """A robot's manifest (wall clock, hardware backends)."""
+    return manifest(tmp, "robot", "wall", field, HARDWARE + extra)
+
+
+def simulated(tmp: Path, extra: str = "") -> Path:
+    """A simulated deployment's manifest."""
+    return manifest(tmp, "sim", "sim", "engr", SIMULATED + extra)
 
 
 @pytest.fixture
