@@ -219,6 +219,27 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
     legi = np.array([p.leg for _, p in rows], dtype=np.int64)
     ts = np.array([t.stamp_ns / 1e9 for t, _ in rows])
     xte, herr = ex.track_errors(xy, yaw, legi, legs)
+    # what the follower steered on: the estimate's cross-track error at each sample;
+    # the truth's less it is the estimate's own sideways error
+    steered = np.array([p.cross_track for _, p in rows])
+    # the samples themselves, for a look at where along the route the errors lie
+    with rec.lock:
+        est = np.array([[p.stamp_ns / 1e9, p.x, p.y, p.yaw] for p in rec.poses])
+        route = [(t, p) for t, p in rec.truth if p is not None and p.route_id == args.experiment]
+    np.savez_compressed(
+        out / "track.npz",
+        t=ts,
+        xy=xy,
+        yaw=yaw,
+        leg=legi,
+        xte=xte,
+        herr=herr,
+        steered=steered,
+        est=est,
+        # the whole route, every state: t, x, y, yaw, leg; and each sample's state
+        route=np.array([[t.stamp_ns / 1e9, t.x, t.y, t.yaw, p.leg] for t, p in route]),
+        states=np.array([p.state.value for _, p in route]),
+    )
     _figures(out, xy, xte, ts, herr, legs, args.experiment)
     with rec.lock:  # the distance driven, measured: the true path over the whole route
         path = np.array(
@@ -230,6 +251,8 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
         "planned_route_m": length,
         "driven_true_m": ex.path_length(path),
         **ex.track_stats(xte, herr),
+        "estimate_xte_mean_cm": float(100 * np.abs(steered).mean()),
+        "estimate_lateral_error_mean_cm": float(100 * np.abs(xte - steered).mean()),
     }
 
 

@@ -6,6 +6,8 @@ asserted; a section that fails makes it exit 1):
 - the same rays through Open3D's RaycastingScene (Embree) when open3d is installed;
 - ENGR exact (resolution-free) visibility;
 - grid-step convergence: locations chosen vs step, and the share of exact pairs found;
+- ENGR's plan: the share of its covered cells kept when the robot stops off its marks
+  (phenorover.eval.tolerance), per radius, no target;
 - a 40 rows x 50 plots field: visibility, greedy vs exact cover, NN vs optimised tour.
 """
 
@@ -25,7 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
 
 from common.field import Field, FieldLayout, ScannerModel, build_field, load_field
+from common.messages.plan import PlanOptions
 from phenorover.eval.results import Bench, Goal
+from phenorover.eval.tolerance import RADII, tolerance
+from services.planner.core import plan
 from services.planner.cover import exact_cover, greedy_cover
 from services.planner.route import Navigator
 from services.planner.tsp import guided_local_search, nearest_neighbour
@@ -128,6 +133,22 @@ def record(bench: Bench, out: dict[str, Any], failed: dict[str, str]) -> None:
         paper=11,
         note="cells between the grid's rays ask for needless locations",
     )
+    tol: dict[str, Any] = out.get("tolerance") or {}
+    by_r = {row["radius_m"]: row for row in tol.get("per_radius", [])}
+    for r in RADII[1:]:  # at 0 every share is 1 by construction
+        row = by_r.get(r, {})
+        worst, mean, sure = (_get(row, k) for k in ("worst", "mean", "guaranteed"))
+        fig(
+            "tolerance",
+            f"ENGR plan: covered cells kept with each stop {100 * r:g} cm off its mark, worst draw",
+            None if worst is None else 100 * worst,
+            "%",
+            note=""
+            if mean is None or sure is None
+            else f"mean {100 * mean:.1f} %, kept whatever each stop's direction "
+            f"{100 * sure:.1f} % ({tol.get('draws')} seeded draws of one of 8 directions "
+            "per stop; the planner's visibility)",
+        )
     fig(
         "big",
         "40 x 50 field: exact visibility",
@@ -302,6 +323,29 @@ def big_section(out: dict[str, Any], tour_limit_s: float) -> None:
     out["big"] = res
 
 
+def tolerance_section(out: dict[str, Any]) -> None:
+    """ENGR planned as ``phenorover plan engr`` does, then its stops moved off their marks."""
+    layout, field = load_field("engr")
+    res = plan(layout, ScannerModel(), PlanOptions(), field=field)
+    xy = field.cand_xy[[field.candidate_index(i) for i in res.selected]]
+    tol, dt = timed(tolerance, layout, field, xy, res.scanner, res.options)
+    print(f"ENGR position tolerance ({len(xy)} locations, {tol.covered} cells, {dt:.2f} s):")
+    for r, w, m, g in zip(tol.radii, tol.worst, tol.mean, tol.guaranteed, strict=True):
+        print(f"  {100 * r:4.0f} cm: worst {w:7.2%}  mean {m:7.2%}  every direction {g:7.2%}")
+    keys = ("worst", "mean", "guaranteed", "shortened")
+    out["tolerance"] = {
+        "locations": len(xy),
+        "cells_covered": tol.covered,
+        "draws": tol.draws,
+        "first_below_99pct_m": tol.first_below(0.99),
+        "time_s": dt,
+        "per_radius": [
+            {"radius_m": r, **{k: getattr(tol, k)[i] for k in keys}}
+            for i, r in enumerate(tol.radii)
+        ],
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", type=Path, help="also write the numbers here")
@@ -312,7 +356,11 @@ def main() -> int:
     bench = Bench("bench_planner")
     out: dict[str, Any] = {"cpus": os.cpu_count(), "targets": TARGETS}
     failed: dict[str, str] = {}
-    sections = {"engr": lambda: engr_section(out), "big": lambda: big_section(out, args.tour_limit)}
+    sections = {
+        "engr": lambda: engr_section(out),
+        "tolerance": lambda: tolerance_section(out),
+        "big": lambda: big_section(out, args.tour_limit),
+    }
     for name, section in sections.items():
         try:
             section()
