@@ -19,10 +19,12 @@ from common.messages.nav import LEASE_ENDED, Leg, NavState
 from services.nav.fine import Fine
 from services.nav.follower_config import FollowerConfig
 from services.nav.pursuit import (
+    aim_at,
     along_remaining,
     cross_track,
     curvature,
     lookahead_point,
+    predict,
     segment_distance,
 )
 
@@ -162,6 +164,14 @@ class Follower:
             self._v = self._w = 0.0
             # how the route ended stays in every progress message after the end
             return Command(0.0, 0.0, self.state, self.leg, 0.0, 0.0, 0.0, "", self.end_detail)
+        if self._join and localized and t <= self.lease_until:
+            self._join = False
+            near = [
+                k
+                for k, lg in enumerate(self.legs)
+                if segment_distance(x, y, lg.x0, lg.y0, lg.x1, lg.y1) <= self.cfg.join_distance_m
+            ]
+            self.leg = near[0] if near else 0
         leg = self.legs[self.leg]
         heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
         xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
@@ -178,26 +188,14 @@ class Follower:
             return out(0.0, 0.0, NavState.FAILED, "failed", f"{LEASE_ENDED}: not renewed")
         if not localized:
             return out(0.0, 0.0, NavState.NOT_LOCALIZED)
-        if self._join:
-            self._join = False
-            near = [
-                k
-                for k, lg in enumerate(self.legs)
-                if segment_distance(x, y, lg.x0, lg.y0, lg.x1, lg.y1) <= self.cfg.join_distance_m
-            ]
-            self.leg = near[0] if near else 0
-            leg = self.legs[self.leg]
-            heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
-            xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
-            herr = wrap_angle(yaw - heading)
-            togo = self._remaining(x, y)
         tol = math.radians(self.cfg.heading_tolerance_deg)
+        align = math.radians(self.cfg.align_tolerance_deg)
         if self.phase == Phase.ALIGN:
-            align = math.radians(self.cfg.align_tolerance_deg)
-            if _leg_len(leg) <= self.cfg.goal_tolerance_m or abs(herr) <= align:
+            aim = wrap_angle(yaw - aim_at(x, y, leg, self.cfg.lookahead_m))
+            if _leg_len(leg) <= self.cfg.goal_tolerance_m or abs(aim) <= align:
                 self.phase = Phase.DRIVE
             else:
-                return out(0.0, self._rotate(-herr, dt), NavState.ROTATING)
+                return out(0.0, self._rotate(-aim, dt), NavState.ROTATING)
         if self.phase == Phase.BACKUP:
             if along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1) < self._backup_to:
                 # pure pursuit in reverse: steer the robot's back along the leg
@@ -222,10 +220,13 @@ class Follower:
                 # line to the last centimetre instead of swerving at the goal point
                 last = self.leg + 1 == len(self.legs)
                 la = self.cfg.final_lookahead_m if last else self.cfg.lookahead_m
-                px, py = lookahead_point(x, y, leg.x0, leg.y0, leg.x1, leg.y1, la, beyond=True)
-                k = curvature(x, y, yaw, px, py)
-                # slow down to stop at the leg's end: v^2 = 2 a d
-                v_stop = math.sqrt(2.0 * self.cfg.max_accel * 0.5 * rem)
+                qx, qy, qyaw = predict(x, y, yaw, self._v, self._w, self.cfg.predict_s)
+                px, py = lookahead_point(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1, la, beyond=True)
+                k = curvature(qx, qy, qyaw, px, py)
+                # slow down to stop at the leg's end (v^2 = 2 a d), where the robot
+                # will be once the drivetrain has taken in this command
+                ahead = along_remaining(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1)
+                v_stop = math.sqrt(2.0 * self.cfg.max_accel * 0.5 * max(0.0, ahead))
                 v = min(self.speed_limit, max(self.cfg.min_speed, v_stop))
                 v = self._ramp(v, self._v, self.cfg.max_accel, dt)
                 w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, v * k))

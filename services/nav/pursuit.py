@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from common.geo import wrap_angle
+from common.messages.nav import Leg
 
 
 def lookahead_point(
@@ -71,3 +72,22 @@ def segment_distance(x: float, y: float, x0: float, y0: float, x1: float, y1: fl
     seg2 = dx * dx + dy * dy
     u = 0.0 if seg2 < 1e-18 else max(0.0, min(1.0, ((x - x0) * dx + (y - y0) * dy) / seg2))
     return math.hypot(x - (x0 + u * dx), y - (y0 + u * dy))
+
+
+def predict(
+    x: float, y: float, yaw: float, v: float, w: float, t: float
+) -> tuple[float, float, float]:
+    """The pose ``t`` seconds ahead driving at (v, w): what a command sent now acts on
+    once the drivetrain has taken it in."""
+    mid = yaw + 0.5 * w * t
+    return x + v * t * math.cos(mid), y + v * t * math.sin(mid), yaw + w * t
+
+
+def aim_at(x: float, y: float, leg: Leg, lookahead: float) -> float:
+    """The heading to turn to before driving ``leg``: toward its look-ahead point, so
+    a robot that a corner's turn in place shifted sideways heads back to the line from
+    the start instead of over the first metres; the leg's own near its end."""
+    px, py = lookahead_point(x, y, leg.x0, leg.y0, leg.x1, leg.y1, lookahead)
+    if math.hypot(px - x, py - y) < lookahead / 2:
+        return math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
+    return math.atan2(py - y, px - x)

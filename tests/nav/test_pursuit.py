@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.nav.pursuit import cross_track, curvature, lookahead_point
+from common.messages.nav import Leg
+from services.nav.pursuit import aim_at, cross_track, curvature, lookahead_point, predict
 
 
 def test_curvature_hand_worked() -> None:
@@ -37,3 +38,21 @@ def test_lookahead_point_stays_on_segment(x: float, y: float) -> None:
 def test_cross_track_sign() -> None:
     assert cross_track(1, 0.5, 0, 0, 2, 0) == pytest.approx(0.5)  # left positive
     assert cross_track(1, -0.5, 0, 0, 2, 0) == pytest.approx(-0.5)
+
+
+def test_predict_carries_the_pose_along_the_arc_of_the_command() -> None:
+    assert predict(1.0, 2.0, 0.0, 0.5, 0.0, 0.2) == pytest.approx((1.1, 2.0, 0.0))
+    # a quarter turn of radius 1 m: the chord's end, heading turned by 90 deg
+    x, y, yaw = predict(0.0, 0.0, 0.0, 1.0, 1.0, math.pi / 2)
+    assert yaw == pytest.approx(math.pi / 2)
+    assert math.hypot(x, y) == pytest.approx(math.pi / 2)  # the midpoint-heading step
+    assert predict(1.0, 2.0, 0.3, 0.5, 0.2, 0.0) == (1.0, 2.0, 0.3)
+
+
+def test_a_robot_beside_the_leg_aims_back_at_the_line() -> None:
+    leg = Leg(x0=0.0, y0=0.0, x1=10.0, y1=0.0)
+    assert aim_at(0.0, 0.0, leg, 0.6) == pytest.approx(0.0)
+    left = aim_at(0.0, 0.08, leg, 0.6)  # 8 cm left of the line: aim right of the leg
+    assert left == pytest.approx(-math.asin(0.08 / 0.6))
+    # at the leg's end there is no line ahead to aim at: the leg's heading
+    assert aim_at(9.9, 0.05, leg, 0.6) == pytest.approx(0.0)
