@@ -151,6 +151,7 @@ ROLES: dict[Role, Grants] = {
 # keys no role is granted: only the simulated deployment (no access control) uses them
 SIMULATION_ONLY = _keys(
     keys.SIM_CLOCK,
+    keys.SIM_ACK,
     keys.SIM_TRUTH,
     keys.SIM_ANTENNAS,
     keys.SIM_WHEELS,
@@ -158,6 +159,7 @@ SIMULATION_ONLY = _keys(
     keys.SIM_LIDAR,
     keys.SIM_IMU,
     keys.SIM_RENDER,
+    keys.SIM_RUN,
 )
 
 

@@ -93,6 +93,10 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     field: str = ""
     robot: str = ""
     clock: Literal["wall", "sim"] = "wall"
+    # with the sim clock: the world waits for the services each step
+    # (common/lockstep.py), up to ``lockstep_deadline_s`` of wall time for a hung one
+    lockstep: bool = False
+    lockstep_deadline_s: Annotated[float, msgspec.Meta(gt=0, le=600.0)] = 60.0
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
     # service name -> its config section, decoded by the service's own Config type
     services: dict[str, dict[str, Any]] = msgspec.field(default_factory=dict)

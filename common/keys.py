@@ -67,6 +67,11 @@ HEALTH = Topic(_k("health/{service}"), system.Health)
 PING = Rpc[system.Ping, system.Pong](_k("rpc/{service}/ping"), system.Ping, system.Pong)
 
 SIM_CLOCK = Topic(_k("sim/clock"), sim.SimClock, control=True)
+# lockstep (common/lockstep.py): each participant's acknowledgement of a step, and
+# the liveliness token by which the simulator knows whom to wait for
+SIM_ACK = Topic(_k("sim/ack/{service}"), sim.ClockAck, control=True)
+LOCKSTEP = _k("sim/lockstep/{service}")
+LOCKSTEP_ALL = _k("sim/lockstep/*")
 SIM_TRUTH = Topic(_k("sim/truth/pose"), sim.TruthPose)
 # the simulated devices' "hardware": read only by the sim backends of gnss, base, scanner
 SIM_ANTENNAS = Topic(_k("sim/device/antennas"), sim.SimAntennas)
@@ -74,6 +79,7 @@ SIM_WHEELS = Topic(_k("sim/device/wheels"), sim.SimWheelCommand, control=True)
 SIM_ENCODERS = Topic(_k("sim/device/encoders"), sim.SimEncoders)
 SIM_LIDAR = Topic(_k("sim/device/lidar"), base.LaserScan)
 SIM_IMU = Topic(_k("sim/device/imu"), base.Imu)
+SIM_RUN = Rpc[sim.SimRun, sim.SimClock](_k("rpc/sim/run"), sim.SimRun, sim.SimClock)
 SIM_RENDER = Rpc[sim.RenderRequest, sim.RenderReply](
     _k("rpc/sim/render"), sim.RenderRequest, sim.RenderReply
 )
@@ -115,6 +121,7 @@ MISSION_CMD = Rpc[mission.MissionCommand, mission.MissionState](
 ALL_TOPICS: tuple[Topic[Any], ...] = (
     HEALTH,
     SIM_CLOCK,
+    SIM_ACK,
     SIM_TRUTH,
     SIM_ANTENNAS,
     SIM_WHEELS,
@@ -140,5 +147,5 @@ TOPICS: dict[str, type] = {t.key: t.type for t in ALL_TOPICS}
 
 RPCS: dict[str, tuple[Any, type]] = {
     r.key: (r.request, r.reply)
-    for r in (PING, NAV_CMD, SCANNER_CMD, MISSION_CMD, SIM_RENDER, PLANNER_PLAN)
+    for r in (PING, NAV_CMD, SCANNER_CMD, MISSION_CMD, SIM_RENDER, SIM_RUN, PLANNER_PLAN)
 }

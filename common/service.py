@@ -20,7 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, Literal, Protocol, TypeVar
 
 import msgspec
 import zenoh
@@ -38,9 +38,11 @@ from common.config import (
     zenoh_config,
 )
 from common.field import FieldError
+from common.lockstep import Inbox, LockstepClock
+from common.messages.sim import ClockAck
 from common.messages.system import Health, Pong
 from common.robot import Robot, default_robot, load_robot
-from common.transport import Bus
+from common.transport import Bus, key_intersects
 
 C = TypeVar("C", bound=msgspec.Struct)
 log = logging.getLogger("phenorover")
@@ -85,6 +87,8 @@ class Context:
     # the deployment manifest the service was started with (None: none), for the
     # child processes it starts, which read their own sections of it
     manifest: Path | None = None
+    # the simulator's, in lockstep: the messages held until a step expects them
+    inbox: Inbox | None = None
 
 
 def setup_logging(level: str) -> None:
@@ -157,6 +161,7 @@ def main(
     build: Callable[[Context, C], Service],
     argv: Sequence[str] | None = None,
     options: CliOptions | None = None,
+    lockstep: Lockstep = "participant",
 ) -> int:
     parser = _parser(name)
     if options is not None:
@@ -199,20 +204,23 @@ def main(
         return EXIT_ZENOH
 
     bus = Bus(session, name)
-    clock: Clock
-    if clock_kind == "sim":
-        sim_clock = SimClock()
-        bus.report("clock_refused", lambda: sim_clock.refused)
-        bus.subscribe(keys.SIM_CLOCK, sim_clock.update)
-        clock = sim_clock
-    else:
-        clock = WallClock()
+    in_step = clock_kind == "sim" and manifest is not None and manifest.lockstep
+    clock, inbox = _clock(bus, lockstep if in_step else "observer", clock_kind, manifest)
     since_ns = time.time_ns()
     run_dir = Path(manifest.run_dir if manifest else "runs")
     # no example field by default: a service that needs one and was given none fails
     field = args.field or (manifest.field if manifest else "")
     ctx = Context(
-        name, machine, bus, clock, logging.getLogger(name), run_dir, field, robot, args.manifest
+        name,
+        machine,
+        bus,
+        clock,
+        logging.getLogger(name),
+        run_dir,
+        field,
+        robot,
+        args.manifest,
+        inbox if lockstep == "world" else None,
     )
     bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text))
     health = threading.Thread(
@@ -221,6 +229,7 @@ def main(
     health.start()
     code = 0
     token: zenoh.LivelinessToken | None = None
+    step_token: zenoh.LivelinessToken | None = None
     try:
         service = build(ctx, cfg)
         # alive only once it serves: build() has declared every subscriber and
@@ -228,6 +237,8 @@ def main(
         token = session.liveliness().declare_token(
             keys.ALIVE.format(machine=machine, service=name, pid=os.getpid(), since_ns=since_ns)
         )
+        if isinstance(clock, LockstepClock):  # the world waits for it from now on
+            step_token = session.liveliness().declare_token(keys.LOCKSTEP.format(service=name))
         log.info("%s: up on %s (%s clock), config: %s", name, machine, clock_kind, cfg)
         service.run(stop)
     except (ConfigError, FieldError) as exc:
@@ -241,14 +252,50 @@ def main(
         health.join(timeout=2.0)
         if token is not None:
             token.undeclare()
+        if step_token is not None:
+            step_token.undeclare()
+        if isinstance(clock, LockstepClock):
+            clock.close()
         bus.close()
         session.close()
     log.info("%s: stopped", name)
     return code
 
 
+Lockstep = Literal["participant", "observer", "world"]
+
+
+def _clock(
+    bus: Bus, lockstep: Lockstep, kind: str, manifest: Manifest | None
+) -> tuple[Clock, Inbox | None]:
+    """The service's clock: the wall's; the simulator's, followed (an ``observer``,
+    such as the dashboard, or any service when the world does not wait); or in
+    lockstep with it (a ``participant``). The ``world`` (the simulator) numbers its
+    messages and holds those it receives until its step: its own inbox."""
+    if kind != "sim":
+        return WallClock(), None
+    inbox = Inbox(key_intersects) if lockstep != "observer" else None
+    if lockstep == "participant" and manifest is not None and inbox is not None:
+        ack = bus.publisher(keys.SIM_ACK.at(service=bus.name))  # before numbering starts
+
+        def acked(t: int) -> None:
+            ack.put(ClockAck(stamp_ns=t, service=bus.name, sim_ns=t, published=bus.counts()))
+
+        step_clock = LockstepClock(inbox, acked, manifest.lockstep_deadline_s)
+        bus.use_lockstep(inbox, step_clock)
+        bus.report("lockstep_late", lambda: step_clock.late)
+        bus.subscribe(keys.SIM_CLOCK, step_clock.update, immediate=True)
+        return step_clock, inbox
+    if inbox is not None:
+        bus.use_lockstep(inbox)
+    sim_clock = SimClock()
+    bus.report("clock_refused", lambda: sim_clock.refused)
+    bus.subscribe(keys.SIM_CLOCK, sim_clock.update, immediate=True)
+    return sim_clock, inbox
+
+
 def _heartbeat(bus: Bus, name: str, machine: str, since_ns: int, stop: threading.Event) -> None:
-    pub = bus.publisher(keys.HEALTH.at(service=name))
+    pub = bus.publisher(keys.HEALTH.at(service=name), in_step=False)
     while True:
         pub.put(
             Health(
@@ -273,6 +320,10 @@ def run(
     config_type: type[C],
     build: Callable[[Context, C], Service],
     options: CliOptions | None = None,
+    lockstep: Lockstep = "participant",
 ) -> None:
-    """Entry point for ``services/<name>/__main__.py``; exits the process."""
-    sys.exit(main(name, config_type, build, options=options))
+    """Entry point for ``services/<name>/__main__.py``; exits the process. In a
+    simulated deployment in lockstep (the manifest's ``lockstep``) the service is a
+    ``participant`` the world waits for, an ``observer`` it does not (the dashboard),
+    or the ``world`` itself."""
+    sys.exit(main(name, config_type, build, options=options, lockstep=lockstep))

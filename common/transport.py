@@ -26,6 +26,7 @@ import zenoh.ext
 
 from common.codec import DecodeStats, decode, encode
 from common.keys import ALIVE_ALL, Rpc, Topic
+from common.lockstep import Inbox, LockstepClock, attachment, parse_attachment
 
 M = TypeVar("M")
 Q = TypeVar("Q")
@@ -82,10 +83,21 @@ class Latest(Generic[M]):
         return result[0] if result else None
 
 
+def key_intersects(a: str, b: str) -> bool:
+    """Whether key expressions ``a`` and ``b`` share a key."""
+    return bool(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)))
+
+
 class Publisher(Generic[M]):
-    def __init__(self, pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher, topic: Topic[M]) -> None:
+    def __init__(
+        self,
+        pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher,
+        topic: Topic[M],
+        stamp: Callable[[str], bytes | None] = lambda _key: None,
+    ) -> None:
         self._pub = pub
         self.topic = topic
+        self._stamp = stamp  # the lockstep attachment of the next message, if any
 
     def wait_matched(self, timeout: float) -> bool:
         """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
@@ -102,7 +114,16 @@ class Publisher(Generic[M]):
             raise TypeError(
                 f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
             )
-        self._pub.put(encode(msg))
+        self._pub.put(encode(msg), attachment=self._stamp(self.topic.key))
+
+
+def _caller_ns(tag: zenoh.ZBytes | None) -> int | None:
+    """The sim time a lockstep caller stamped its query with (None: no stamp)."""
+    try:
+        what, ns = tag.to_bytes().decode().split("\n") if tag is not None else ("", "")
+        return int(ns) if what == "at" else None
+    except (UnicodeDecodeError, ValueError):
+        return None
 
 
 class Bus:
@@ -122,6 +143,31 @@ class Bus:
         self._reports: dict[str, Callable[[], int]] = {}
         self._handles: list[Any] = []
         self._pool = ThreadPoolExecutor(max_workers=rpc_workers, thread_name_prefix=f"{name}-rpc")
+        # lockstep with the simulator (common/lockstep.py): off unless use_lockstep
+        self._inbox: Inbox | None = None
+        self._clock: LockstepClock | None = None
+        self._seq_lock = threading.Lock()
+        self.published: dict[str, int] = {}  # key -> messages put on it, in lockstep
+
+    def use_lockstep(self, inbox: Inbox, clock: LockstepClock | None = None) -> None:
+        """Take part in the simulator's lockstep: number every message put (and send
+        it with congestion control BLOCK: a dropped one would be waited for), hold
+        each numbered message received until its step (``inbox``), and with
+        ``clock`` answer RPCs between steps and stamp calls with the caller's time.
+        Call before declaring publishers and subscribers."""
+        self._inbox, self._clock = inbox, clock
+
+    def counts(self) -> dict[str, int]:
+        """How many messages have been put per key, in lockstep."""
+        with self._seq_lock:
+            return dict(self.published)
+
+    def _stamp(self, key: str) -> bytes | None:
+        if self._inbox is None:
+            return None
+        with self._seq_lock:
+            n = self.published[key] = self.published.get(key, 0) + 1
+        return attachment(self.name, n)
 
     def _dropped(self, key: str, exc: Exception) -> None:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -157,13 +203,18 @@ class Bus:
         d, c = self.decode_stats, self.callback_stats
         return d.last_error if d.last_ns >= c.last_ns else c.last_error
 
-    def publisher(self, topic: Topic[M]) -> Publisher[M]:
+    def publisher(self, topic: Topic[M], in_step: bool = True) -> Publisher[M]:
+        """A publisher on ``topic``; in lockstep its messages are numbered unless
+        ``in_step`` is False (a heartbeat on the wall clock, which no step waits for)."""
         if topic.bulk:
             cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
         elif topic.control:
             cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.REAL_TIME
         else:
             cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.DATA
+        numbered = self._inbox is not None and in_step
+        if numbered:
+            cc = zenoh.CongestionControl.BLOCK
         pub: Any
         if topic.history:
             # cached and sequenced: subscribers recover what a cut link lost (the
@@ -182,12 +233,19 @@ class Bus:
         else:
             pub = self.session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
         self._handles.append(pub)
-        return Publisher(pub, topic)
+        return Publisher(pub, topic, self._stamp) if numbered else Publisher(pub, topic)
 
-    def subscribe(self, topic: Topic[M], callback: Callable[[M], object]) -> None:
-        """Call ``callback`` with each decoded message on ``topic`` (a key or pattern)."""
+    def subscribe(
+        self, topic: Topic[M], callback: Callable[[M], object], immediate: bool = False
+    ) -> None:
+        """Call ``callback`` with each decoded message on ``topic`` (a key or pattern);
+        in lockstep at the step that expects it unless ``immediate``."""
         self.subscribe_raw(
-            topic.key, lambda data: decode(data, topic.type), callback, history=topic.history > 0
+            topic.key,
+            lambda data: decode(data, topic.type),
+            callback,
+            history=topic.history > 0,
+            immediate=immediate,
         )
 
     def latest(self, topic: Topic[M]) -> Latest[M]:
@@ -214,7 +272,11 @@ class Bus:
                     query.reply_err(f"bad request on {key}: {exc}".encode())
                     return
                 try:
-                    rep = handler(req)
+                    if self._clock is None:
+                        rep = handler(req)
+                    else:
+                        with self._clock.serving(_caller_ns(query.attachment)):
+                            rep = handler(req)
                 except RequestError as exc:
                     query.reply_err(f"{exc}".encode())
                     return
@@ -237,7 +299,8 @@ class Bus:
         Raises RpcError with the service's reason on an error reply, RpcTimeout when
         nobody answers within ``timeout`` seconds.
         """
-        replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout)
+        at = None if self._clock is None else f"at\n{self._clock.now_ns()}".encode()
+        replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
         for reply in replies:
             if reply.ok is not None:
                 try:
@@ -254,15 +317,19 @@ class Bus:
         (``alive/...``), those declared before this call included: alive False when a
         token goes, which is within milliseconds of its process dying (the kernel
         closes its connection), long before any heartbeat or lease would tell."""
+        self.watch(ALIVE_ALL, callback)
+
+    def watch(self, key: str, callback: Callable[[str, bool], object]) -> None:
+        """:meth:`watch_alive` for the liveliness tokens matching ``key``."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
             except Exception:
-                self._failed(ALIVE_ALL, "liveliness callback")
+                self._failed(key, "liveliness callback")
 
         self._handles.append(
-            self.session.liveliness().declare_subscriber(ALIVE_ALL, on_sample, history=True)
+            self.session.liveliness().declare_subscriber(key, on_sample, history=True)
         )
 
     def put_raw(self, key: str, data: bytes) -> None:
@@ -276,6 +343,7 @@ class Bus:
         decoder: Callable[[bytes], M],
         callback: Callable[[M], object],
         history: bool = False,
+        immediate: bool = False,
     ) -> None:
         """Subscribe to a foreign encoding: ``decoder`` raises on bad bytes (any
         exception), which is logged once, counted and dropped like a bad message. A
@@ -284,16 +352,27 @@ class Bus:
         publishers' caches are asked for what was sent before this subscription and
         for what a cut link lost (each message once)."""
 
+        inbox = None if immediate else self._inbox
+        sub = -1 if inbox is None else inbox.subscribed(key)
+
+        def run(msg: M) -> None:
+            try:
+                callback(msg)
+            except Exception:
+                self._failed(key, "subscriber callback")
+
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 msg = decoder(sample.payload.to_bytes())
             except Exception as exc:
                 self._dropped(key, exc)
                 return
-            try:
-                callback(msg)
-            except Exception:
-                self._failed(key, "subscriber callback")
+            tag = None if inbox is None or sample.attachment is None else sample.attachment
+            sent = None if tag is None else parse_attachment(tag.to_bytes())
+            if inbox is not None and sent is not None:
+                inbox.deliver(sub, str(sample.key_expr), sent[0], sent[1], lambda: run(msg))
+            else:
+                run(msg)
 
         if history:
             self._handles.append(

@@ -17,7 +17,7 @@ from common.client import (
     open_client,
     wait_alive,
 )
-from common.config import ConfigError
+from common.config import ConfigError, load_manifest
 from common.service import setup_logging
 from common.status import format_table, query_alive
 
@@ -92,6 +92,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     every location was scanned, 1 when the survey failed or left a location unscanned
     (each named with the reason), 2 on a bad manifest or field, found before anything
     starts (:func:`phenorover.preflight.preflight`, with the field given)."""
+    from common import keys
+    from common.messages.sim import SimRun
     from common.transport import Bus
     from phenorover.launcher import Launcher
     from services.mission.cli import describe, run_survey
@@ -100,7 +102,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if field and Path(field).exists():  # one file for every service, whatever its cwd
         field = str(Path(field).resolve())
     try:
-        launcher = Launcher(args.manifest, field=field)
+        # in lockstep the world is held until the survey has started: the same seed
+        # then gives the same survey
+        held = (
+            {"sim": ["--set", "start_held=true"]} if load_manifest(args.manifest).lockstep else {}
+        )
+        launcher = Launcher(args.manifest, field=field, extra_args=held)
     except ConfigError as exc:
         print(f"phenorover sim: {exc}", file=sys.stderr)
         return 2
@@ -121,7 +128,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         bus = Bus(session, "sim-cli")
         problems: list[str] = []
         try:
-            final = run_survey(bus, field, args.survey_timeout, problems, args.new)
+            release = (lambda: bus.call(keys.SIM_RUN, SimRun(), timeout=10)) if held else None
+            final = run_survey(bus, field, args.survey_timeout, problems, args.new, release)
             if final is not None:
                 from services.mission.registration import wait_registration
 

@@ -28,6 +28,23 @@ class SimClock(Message, frozen=True, kw_only=True):
     # the simulator's own config caps it at 1000; a follower that received 1e6 would
     # believe the world may run a million times faster than the wall clock
     real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1e6)] = 1.0
+    # lockstep (common/lockstep.py): the step's number (-1: a world that does not
+    # wait), and per "<service>|<key>" how many messages the step expects delivered
+    step: int = -1
+    expect: dict[str, int] = msgspec.field(default_factory=dict)
+
+
+class SimRun(Message, frozen=True, kw_only=True):
+    """Let a simulator started held (``start_held``) step its world."""
+
+
+class ClockAck(Message, frozen=True, kw_only=True):
+    """A lockstep participant has done the step at ``sim_ns``; ``published``: how many
+    messages it has published so far, per key."""
+
+    service: str
+    sim_ns: Annotated[int, msgspec.Meta(ge=0)]
+    published: dict[str, int] = msgspec.field(default_factory=dict)
 
 
 class TruthPose(Message, frozen=True, kw_only=True):

@@ -14,6 +14,7 @@ import queue
 import socket
 import threading
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 from common import keys
@@ -188,6 +189,9 @@ class SimReceiver:
         self.antenna = antenna.id
         self._reach = ReachM2(cfg.rtk, cfg.seed, antenna.id, frame)
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=100)
+        # set: each epoch's text goes straight to it, in the subscriber's thread,
+        # rather than to a reader (the gnss service's, which then starts none)
+        self.sink: Callable[[bytes], None] | None = None
         bus.subscribe(keys.SIM_ANTENNAS, self._on_truth)
 
     def epoch(self, msg: SimAntennas) -> str:
@@ -200,6 +204,9 @@ class SimReceiver:
             self._push(text)
 
     def _push(self, text: str) -> None:
+        if self.sink is not None:
+            self.sink(text.encode("ascii"))
+            return
         # nobody reading: drop, as a serial port would overrun
         with contextlib.suppress(queue.Full):
             self._queue.put_nowait(text.encode("ascii"))

@@ -3,6 +3,7 @@ compass heading out on the bus."""
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections.abc import Callable
 
@@ -14,7 +15,7 @@ from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
 from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
 from services.gnss.pairing import EpochPairer
-from services.gnss.receiver import Receiver, open_receiver
+from services.gnss.receiver import Receiver, SimReceiver, open_receiver
 from services.gnss.solution import FixBuilder, heading
 
 
@@ -40,29 +41,39 @@ class GnssService:
         if (pair := self.pairs.add(epoch, fix)) is not None:
             self.heading_pub.put(heading(*pair, self.frame, self.compass))
 
+    def _feed(self, antenna: int, builder: FixBuilder, data: bytes) -> None:
+        """Take in what antenna ``antenna``'s receiver sent: its fixes out."""
+        where = f"gnss/{antenna}/nmea"
+        for line in self.splitters[antenna].feed(data):
+            try:
+                s = parse_sentence(line)
+            except NmeaError as exc:
+                if self.ctx.bus.decode_stats.record(where, str(exc)):
+                    self.ctx.log.warning("antenna %d: dropped sentence: %s", antenna, exc)
+                continue
+            if isinstance(s, Gst):
+                builder.on_gst(s)
+            elif isinstance(s, Gga) and s.time_s is not None:
+                fix = builder.on_gga(s, self.ctx.clock.now_ns())
+                if fix is not None:
+                    self._on_fix(s.time_s, fix)
+
     def _read(self, rx: Receiver, stop: threading.Event) -> None:
-        splitter = self.splitters[rx.antenna]
         builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
-        where = f"gnss/{rx.antenna}/nmea"
         while not stop.is_set():
-            for line in splitter.feed(rx.read(stop)):
-                try:
-                    s = parse_sentence(line)
-                except NmeaError as exc:
-                    if self.ctx.bus.decode_stats.record(where, str(exc)):
-                        self.ctx.log.warning("antenna %d: dropped sentence: %s", rx.antenna, exc)
-                    continue
-                if isinstance(s, Gst):
-                    builder.on_gst(s)
-                elif isinstance(s, Gga) and s.time_s is not None:
-                    fix = builder.on_gga(s, self.ctx.clock.now_ns())
-                    if fix is not None:
-                        self._on_fix(s.time_s, fix)
+            self._feed(rx.antenna, builder, rx.read(stop))
 
     def run(self, stop: threading.Event) -> None:
+        for rx in self.receivers:
+            if isinstance(rx, SimReceiver):
+                # the simulator's: its epochs are taken in as they are delivered (in
+                # lockstep, at their step), not by a thread of their own
+                builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
+                rx.sink = functools.partial(self._feed, rx.antenna, builder)
         threads = [
             threading.Thread(target=self._read, args=(rx, stop), name=f"gnss{rx.antenna}")
             for rx in self.receivers
+            if not isinstance(rx, SimReceiver)
         ]
         for t in threads:
             t.start()

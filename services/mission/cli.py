@@ -7,6 +7,7 @@ import argparse
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from common import keys
@@ -102,12 +103,14 @@ def run_survey(
     timeout: float,
     problems: list[str] | None = None,
     new: bool = False,
+    started: Callable[[], object] | None = None,
 ) -> MissionState | None:
     """Start a survey and print a line per step until it ends; the final state (None
     when it could not start). A mission the service resumed (the deployment was stopped
     mid-survey) is followed to its end instead, or with ``new`` aborted first (its log
     and scans stay). ``problems`` gets the text of every error event of the mission (a
-    location skipped or failed, and why)."""
+    location skipped or failed, and why). ``started`` is called once the mission is
+    (a world held until then is let run by it)."""
     seen: list[MissionEvent] = []
     heard = threading.Condition()
 
@@ -138,6 +141,8 @@ def run_survey(
         else:
             s = _call(bus, MissionStart(field=field))
             print(f"mission {s.mission} started", flush=True)
+        if started is not None:
+            started()
     except RpcError as exc:
         print(f"phenorover sim: {exc}", file=sys.stderr)
         return None

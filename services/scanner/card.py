@@ -71,12 +71,18 @@ class RenderedCard:
 
 
 def emulate(
-    ctx: Context, bus: can.BusABC, card: RenderedCard, faults: FaroFaults, scan_time_s: float | None
+    ctx: Context,
+    bus: can.BusABC,
+    card: RenderedCard,
+    faults: FaroFaults,
+    scan_time_s: float | None,
+    timed: bool = True,
 ) -> FaroEmulator:
     """The FARO emulator answering on ``bus``, on the service's clock, its completed scans
-    stored on ``card`` (not started)."""
+    stored on ``card`` (not started); ``timed`` False: advanced by its owner's ticks."""
     return FaroEmulator(
         bus,
+        timed=timed,
         now=lambda: ctx.clock.now_ns() / 1e9,
         scan_duration_s=ScanDuration(scan_time_s),
         faults=faults,

@@ -9,10 +9,13 @@ scanner's card.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
 
 import can
 
+from common import clock as clk
+from common.clock import Clock
 from common.config import ConfigError
 from common.service import Context
 from services.scanner.card import RenderedCard, emulate, scan_path
@@ -20,6 +23,9 @@ from services.scanner.config import ScannerConfig
 from services.scanner.slcan_host import SlcanHost
 
 __all__ = ["BACKENDS", "BusOffGate", "CanDevice", "SimDevice", "scan_path"]
+
+# the emulated scan advances this often (sim time): twice its status period of 0.1 s
+TICK_HZ = 20.0
 
 
 class CanDevice:
@@ -96,11 +102,23 @@ class SimDevice:
         client_bus = can.Bus(interface="virtual", channel=channel)
         self._device_bus = can.Bus(interface="virtual", channel=channel)
         self.card = RenderedCard(ctx, cfg.storage_dir, cfg.render_step_deg)
+        # the scan advances on the service's clock, in a thread of its own that the
+        # clock lets run each step (in lockstep, at a fixed point of it); the
+        # emulator's thread only answers frames
         self.emulator = emulate(
-            ctx, self._device_bus, self.card, cfg.sim_faults, cfg.sim_scan_time_s
+            ctx, self._device_bus, self.card, cfg.sim_faults, cfg.sim_scan_time_s, timed=False
         )
         self.bus: can.BusABC = BusOffGate(client_bus, self.emulator.bus_off)
         self.emulator.start()
+        self._stop = threading.Event()
+        self._ticker = threading.Thread(
+            target=self._tick, args=(ctx.clock,), name="faro-scan", daemon=True
+        )
+        self._ticker.start()
+
+    def _tick(self, clock: Clock) -> None:
+        for _ in clk.ticks(clock, TICK_HZ, self._stop):
+            self.emulator.tick()
 
     @property
     def project(self) -> str:
@@ -114,6 +132,8 @@ class SimDevice:
         return "bus-off (simulated fault)" if self.emulator.bus_off() else ""
 
     def close(self) -> None:
+        self._stop.set()
+        self._ticker.join(timeout=2.0)
         self.emulator.stop()
         self._device_bus.shutdown()
         self.bus.shutdown()

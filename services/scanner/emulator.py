@@ -128,7 +128,13 @@ class FaroEmulator:
         on_scan_complete: ScanCallback | None = None,
         inclination_deg: Callable[[], tuple[float, float]] = lambda: (0.0, 0.0),
         codec: FaroCodec | None = None,
+        timed: bool = True,
     ) -> None:
+        # ``timed`` False: the scan advances (and completes, and reports its status)
+        # only in :meth:`tick`, called on the owner's clock, not in the thread that
+        # answers frames: in lockstep with a simulator that keeps it to the steps
+        self._timed = timed
+        self._lock = threading.RLock()
         self._bus = bus
         self._now = now
         self._duration = scan_duration_s
@@ -194,15 +200,22 @@ class FaroEmulator:
         """Handle at most one received frame (waiting up to ``timeout_s`` wall
         seconds for it), then advance the scan and send a status when due."""
         msg = self._bus.recv(timeout_s)
-        if msg is not None:
-            self._receive(msg)
-        off = self.bus_off()
-        if self._was_off and not off:
-            log.warning("FARO emulator: bus-off over (fault)")
-        self._was_off = off
-        self._advance()
-        if self._now() - self._last_status_t >= self._status_period:
-            self._send_status()
+        with self._lock:
+            if msg is not None:
+                self._receive(msg)
+            if self._timed:
+                self.tick()
+
+    def tick(self) -> None:
+        """Advance the scan to now and send a status when one is due."""
+        with self._lock:
+            off = self.bus_off()
+            if self._was_off and not off:
+                log.warning("FARO emulator: bus-off over (fault)")
+            self._was_off = off
+            self._advance()
+            if self._now() - self._last_status_t >= self._status_period:
+                self._send_status()
 
     def _receive(self, msg: can.Message) -> None:
         if msg.arbitration_id not in self._ids.values() or msg.is_extended_id:

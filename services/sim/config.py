@@ -37,6 +37,9 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``faults``: device faults scheduled in sim time, ``[[services.sim.faults]]`` entries
     (see :mod:`services.sim.faults` and docs/faults.md); simulation only, the truth
     is never touched.
+    ``start_held``: in lockstep (the manifest's ``lockstep``), the world stands at its
+    start until asked to run (``rpc/sim/run``): whoever starts a survey or an
+    experiment does so first, so the same seed gives the same run.
     ``nice``: how far the simulator yields the CPU to the services it feeds (a Unix
     nice increment, 0: not at all). On a machine too busy for ``real_time_factor``
     the world then slows down, as the services are not able to in the field: at the
@@ -61,6 +64,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     scan_dir: str = ""
     faults: list[Fault] = msgspec.field(default_factory=list)
     nice: Annotated[int, msgspec.Meta(ge=0, le=19)] = 10
+    start_held: bool = False
 
 
 class SimCli:

@@ -23,6 +23,7 @@ import numpy as np
 
 from common import keys
 from common.clock import NS
+from common.config import load_manifest
 from common.field import load_field
 from common.messages.base import LaserScan
 from common.messages.core import Array
@@ -32,12 +33,14 @@ from common.messages.sim import (
     SimAntennas,
     SimClock,
     SimEncoders,
+    SimRun,
     SimWheelCommand,
     TruthPose,
 )
 from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
+from services.sim.barrier import Barrier
 from services.sim.config import SimConfig
 from services.sim.faults import FaultSchedule, describe
 from services.sim.imu import ImuModel
@@ -86,6 +89,15 @@ class SimService:
         self.imu_pub = bus.publisher(keys.SIM_IMU)
         bus.subscribe(keys.SIM_WHEELS, self._on_wheels)
         bus.serve(keys.SIM_RENDER, self.render)
+        self.barrier: Barrier | None = None
+        self._held = threading.Event()
+        if ctx.inbox is not None and ctx.manifest is not None:
+            self.barrier = Barrier(bus, load_manifest(ctx.manifest).lockstep_deadline_s)
+            if cfg.start_held:
+                self._held.set()
+            bus.serve(keys.SIM_RUN, self._run)
+            bus.report("lockstep_late", lambda: self.barrier.late if self.barrier else 0)
+        self._tick = SimClock(sim_ns=0)
         angles = beam_angles(cfg.world.lidar)
         self._lidar_meta = (
             float(angles[0]),
@@ -164,6 +176,28 @@ class SimService:
             roll=roll,
             render_s=time.monotonic() - t0,
         )
+
+    def _run(self, _req: SimRun) -> SimClock:
+        """Let a world started held step."""
+        self._held.clear()
+        return self._tick
+
+    def _hold(self, stop: threading.Event) -> None:
+        """Stand at the first step until asked to run, its tick sent again now and
+        then for the services still starting."""
+        self.ctx.log.info("held at sim time %.2f s until asked to run", self.sim_ns / NS)
+        while self._held.is_set() and not stop.wait(0.5):
+            self.clock_pub.put(self._tick)
+
+    def _await_step(self, stop: threading.Event) -> None:
+        """Lockstep: wait for every participant's acknowledgement of this step, then
+        take in the wheel commands they counted in it."""
+        assert self.barrier is not None and self.ctx.inbox is not None
+        self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop)
+        expect = self.barrier.expect(self.ctx.name, self.ctx.bus.counts())
+        thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
+        for thunk in thunks:  # each takes the world's lock itself
+            thunk()
 
     def _step(self, dt: float) -> None:
         c = self._cmd
@@ -264,16 +298,26 @@ class SimService:
         wall_dt = dt / self.cfg.real_time_factor
         t_next = time.monotonic()
         k = 0
+        if self.sim_ns > 0:  # a world carried on from its snapshot is not held again
+            self._held.clear()
         while not stop.is_set():
             with self._lock:
-                self.clock_pub.put(
-                    SimClock(
-                        stamp_ns=self.sim_ns,
-                        sim_ns=self.sim_ns,
-                        real_time_factor=self.cfg.real_time_factor,
-                    )
+                self._publish(k)  # what the devices sense, then the tick expecting it
+                b = self.barrier
+                self._tick = SimClock(
+                    stamp_ns=self.sim_ns,
+                    sim_ns=self.sim_ns,
+                    real_time_factor=self.cfg.real_time_factor,
+                    step=-1 if b is None else k,
+                    expect={} if b is None else b.expect(self.ctx.name, self.ctx.bus.counts()),
                 )
-                self._publish(k)
+                self.clock_pub.put(self._tick)
+            if self.barrier is not None:
+                self._await_step(stop)
+                if self._held.is_set():
+                    self._hold(stop)
+                    t_next = time.monotonic()
+            with self._lock:
                 self._step(dt)
             k += 1
             t_next += wall_dt

@@ -165,7 +165,7 @@ def test_a_manifest_still_setting_a_moved_key_is_told_where_it_went(
 def test_nav_refuses_a_follower_faster_than_the_robot(tmp_path: Path) -> None:
     slow = _moved(tmp_path, "max_speed = 1.0\n", "max_speed = 0.1\n")
     check_limits(NavConfig(), default_robot())
-    with pytest.raises(ConfigError, match=r"follower\] max_speed = 0.15 .* max_speed = 0.1"):
+    with pytest.raises(ConfigError, match=r"follower\] max_speed = 0.5 .* max_speed = 0.1"):
         check_limits(NavConfig(), slow)
     check_limits(NavConfig(follower=FollowerConfig(max_speed=0.1)), slow)
 

@@ -1,0 +1,144 @@
+"""Lockstep's two halves without Zenoh: the inbox that holds messages until the step
+expecting them, and the participant's clock that runs each step's work in a fixed
+order before acknowledging it."""
+
+from __future__ import annotations
+
+import threading
+
+from common.lockstep import Inbox, LockstepClock, attachment, parse_attachment
+from common.messages.sim import SimClock
+
+
+def same_key(a: str, b: str) -> bool:
+    return a == b or (a.endswith("*") and b.startswith(a[:-1]))
+
+
+def inbox_with(*keys: str) -> tuple[Inbox, list[int]]:
+    inbox = Inbox(same_key)
+    subs = [inbox.subscribed(k) for k in keys]
+    inbox.take({}, 0.0)  # the first step: the subscriptions are no longer new
+    return inbox, subs
+
+
+def test_an_attachment_says_who_sent_a_message_and_its_number() -> None:
+    assert parse_attachment(attachment("nav", 42)) == ("nav", 42)
+    assert parse_attachment(b"not ours") is None
+    assert parse_attachment(b"\xff\xfe") is None
+
+
+def test_messages_wait_for_the_step_that_expects_them_and_run_in_a_fixed_order() -> None:
+    inbox, (sub,) = inbox_with("odom")
+    ran: list[str] = []
+    # heard in another order than the step runs them
+    inbox.deliver(sub, "odom", "base", 1, lambda: ran.append("base1"))
+    inbox.deliver(sub, "odom", "sim", 1, lambda: ran.append("sim1"))
+    inbox.deliver(sub, "odom", "base", 2, lambda: ran.append("base2"))
+    thunks, late = inbox.take({"base|odom": 1, "sim|odom": 1}, 1.0)
+    for t in thunks:
+        t()
+    assert ran == ["base1", "sim1"] and late == []
+    # the third, published after the step's count was taken, waits for the next step
+    thunks, _ = inbox.take({"base|odom": 2, "sim|odom": 1}, 1.0)
+    assert len(thunks) == 1
+
+
+def test_a_step_waits_for_an_expected_message_still_on_its_way() -> None:
+    inbox, (sub,) = inbox_with("fix")
+    inbox.deliver(sub, "fix", "gnss", 1, lambda: None)
+    inbox.take({"gnss|fix": 1}, 1.0)
+    late = threading.Timer(0.1, inbox.deliver, (sub, "fix", "gnss", 2, lambda: None))
+    late.start()
+    thunks, missing = inbox.take({"gnss|fix": 2}, 5.0)
+    assert len(thunks) == 1 and missing == []
+
+
+def test_a_message_that_never_comes_is_named_after_the_timeout() -> None:
+    inbox, (sub,) = inbox_with("fix")
+    inbox.deliver(sub, "fix", "gnss", 1, lambda: None)
+    inbox.take({"gnss|fix": 1}, 1.0)
+    thunks, missing = inbox.take({"gnss|fix": 3}, 0.05)
+    assert thunks == [] and missing == ["gnss|fix"]
+
+
+def test_what_was_published_before_a_subscription_is_not_waited_for() -> None:
+    inbox = Inbox(same_key)
+    inbox.subscribed("status")
+    thunks, missing = inbox.take({"scanner|status": 7}, 5.0)
+    assert thunks == [] and missing == []
+
+
+def test_two_subscriptions_to_a_key_each_get_every_message() -> None:
+    inbox, (a, b) = inbox_with("antennas", "antennas")
+    ran: list[str] = []
+    inbox.deliver(a, "antennas", "sim", 1, lambda: ran.append("a"))
+    inbox.deliver(b, "antennas", "sim", 1, lambda: ran.append("b"))
+    inbox.deliver(a, "antennas", "sim", 1, lambda: ran.append("again"))  # a replay
+    for t in inbox.take({"sim|antennas": 1}, 1.0)[0]:
+        t()
+    assert ran == ["a", "b"]
+
+
+def tick(clock: LockstepClock, step: int, ms: int) -> None:
+    clock.update(SimClock(sim_ns=ms * 1_000_000, step=step))
+
+
+def test_the_clock_runs_each_due_thread_in_turn_and_then_acknowledges() -> None:
+    acks: list[int] = []
+    acked = threading.Condition()
+
+    def ack(t: int) -> None:
+        with acked:
+            acks.append(t)
+            acked.notify_all()
+
+    clock = LockstepClock(Inbox(same_key), ack, deadline_s=5.0)
+    stop = threading.Event()
+    order: list[tuple[str, int]] = []
+
+    def worker(name: str, period_ms: int) -> None:
+        t = 0
+        while clock.sleep_until_ns(t * 1_000_000, stop):
+            order.append((name, clock.now_ns() // 1_000_000))
+            t += period_ms
+
+    threads = [
+        threading.Thread(target=worker, args=("fast", 20), daemon=True),
+        threading.Thread(target=worker, args=("slow", 40), daemon=True),
+    ]
+    for th in threads:
+        th.start()
+        while th not in clock._waiting:  # registered in a known order
+            threading.Event().wait(0.001)
+    for step, ms in enumerate((0, 20, 40, 60)):
+        tick(clock, step, ms)
+        due = ms * 1_000_000
+        with acked:
+            assert acked.wait_for(lambda: due in acks, 5.0)  # noqa: B023 (waited for here)
+    stop.set()
+    clock.close()
+    assert order == [
+        ("fast", 0),
+        ("slow", 0),
+        ("fast", 20),
+        ("fast", 40),
+        ("slow", 40),
+        ("fast", 60),
+    ]
+    assert acks == [0, 20_000_000, 40_000_000, 60_000_000]
+
+
+def test_an_rpc_is_served_once_the_callee_has_done_the_callers_step() -> None:
+    clock = LockstepClock(Inbox(same_key), lambda t: None, deadline_s=5.0)
+    served = threading.Event()
+
+    def serve() -> None:
+        with clock.serving(40_000_000):
+            served.set()
+
+    threading.Thread(target=serve, daemon=True).start()
+    tick(clock, 0, 20)
+    assert not served.wait(0.2)
+    tick(clock, 1, 40)
+    assert served.wait(5.0)
+    clock.close()
