@@ -58,13 +58,15 @@ from tests.bench.survey_compare import (
     PRE_ALIGNMENT_MAX_CM,
     compare,
 )
+from tests.bench.survey_pace import pace_figures, reference_model, survey_pace
 
 REPO = Path(__file__).resolve().parents[2]
-# name -> (manifest, navigation profile)
-SURVEYS = {
-    "sim": (REPO / "deploy" / "sim.toml", "ours"),
-    "hil": (REPO / "deploy" / "hil.toml", "ours"),
-    "paper": (REPO / "deploy" / "sim.toml", "paper"),
+# name -> (manifest, navigation profile, field: None for the manifest's)
+SURVEYS: dict[str, tuple[Path, str, str | None]] = {
+    "sim": (REPO / "deploy" / "sim.toml", "ours", None),
+    "spl": (REPO / "deploy" / "sim.toml", "ours", "spl"),
+    "hil": (REPO / "deploy" / "hil.toml", "ours", None),
+    "paper": (REPO / "deploy" / "sim.toml", "paper", None),
 }
 SUMMARY = re.compile(
     r"summary: .*?(\d+)/(\d+) scans done, (\d+) failed, ([\d.]+) m driven.*?; wall (\d+) s; "
@@ -172,15 +174,19 @@ def registration(run_dir: Path) -> tuple[dict[str, float], str]:
     return out, ""
 
 
-def survey_manifest(manifest: Path, profile: str, seed: int | None, tmp: Path) -> Path:
+def survey_manifest(
+    manifest: Path, profile: str, seed: int | None, tmp: Path, field: str | None = None
+) -> Path:
     """``manifest`` with navigation ``profile``'s settings over its own and, with
-    ``seed``, another draw of the simulator's and receivers' noise (a file in ``tmp``;
-    the shipped one for ``ours`` without a seed)."""
-    if profile == "ours" and seed is None:
+    ``seed``, another draw of the simulator's and receivers' noise, and ``field`` (a
+    file in ``tmp``; the shipped one for ``ours`` without a seed or a field)."""
+    if profile == "ours" and seed is None and field is None:
         return manifest
     m = profiles.apply(read_toml(manifest), profile)
     if seed is not None:
         m = profiles.seeded(m, seed)
+    if field is not None:
+        m["field"] = field
     path = tmp / f"{manifest.stem}-{profile}-{seed}.toml"
     path.write_text(tomli_w.dumps(m))
     return path
@@ -188,7 +194,10 @@ def survey_manifest(manifest: Path, profile: str, seed: int | None, tmp: Path) -
 
 def title(name: str, manifest: Path) -> str:
     """How survey ``name``'s figures are named (their common beginning)."""
-    what = "make sim with the paper's method" if name == "paper" else f"make {name}"
+    what = {
+        "paper": "make sim with the paper's method",
+        "spl": "phenorover sim --field spl",
+    }.get(name, f"make {name}")
     return f"{what} ({manifest.name})"
 
 
@@ -203,20 +212,37 @@ def carry(
     return {} if old is None else {n: old.details[n] for n in names if n in old.details}
 
 
-def one_survey(manifest: Path, profile: str, seed: int | None) -> dict[str, Any]:
-    """One survey and its scoring: its figures (see :func:`registration`), its true
-    stops and ``failed`` (why not, or empty)."""
+def one_survey(
+    manifest: Path, profile: str, seed: int | None, field: str | None = None
+) -> dict[str, Any]:
+    """One survey and its scoring: its figures (see :func:`registration` and
+    :func:`survey_pace`), its true stops and ``failed`` (why not, or empty)."""
     with tempfile.TemporaryDirectory() as tmp:
-        stats, why = survey(survey_manifest(manifest, profile, seed, Path(tmp)))
+        path = survey_manifest(manifest, profile, seed, Path(tmp), field)
+        stats, why = survey(path)
+        model = reference_model(path)
     print(f"{profile} seed {seed}: {why or json.dumps(stats)}", flush=True)
     reg, reg_why = ({}, why) if why else registration(Path(stats["run_dir"]))
     run_dir = Path(stats["run_dir"]) if not why and "run_dir" in stats else None
     stops = true_stops_cm(run_dir) if run_dir else []
-    return {**stats, **reg, "seed": seed, "true_stops_cm": stops, "failed": why or reg_why}
+    paced = survey_pace(run_dir, model) if run_dir else {}
+    return {
+        **stats,
+        **reg,
+        **paced,
+        "seed": seed,
+        "true_stops_cm": stops,
+        "failed": why or reg_why,
+    }
 
 
 def measure(
-    bench: Bench, name: str, manifest: Path, profile: str, seeds: list[int] | None
+    bench: Bench,
+    name: str,
+    manifest: Path,
+    profile: str,
+    seeds: list[int] | None,
+    field_name: str | None = None,
 ) -> dict[str, Any]:
     """The surveys on ``manifest`` under navigation ``profile``, one per seed (the
     manifest's own draw when ``seeds`` is None), and their figures: each the mean over
@@ -224,12 +250,13 @@ def measure(
     details: the means, and ``runs`` per seed."""
     try:
         models = from_manifest(manifest)
-        field = load_manifest(manifest).field
+        field = field_name or load_manifest(manifest).field
+        model = reference_model(manifest)
     except ConfigError as exc:
         bench.fail(name, str(exc))
         return {"failed": str(exc)}
     draws: list[int | None] = list(seeds) if seeds else [None]
-    runs = [one_survey(manifest, profile, seed) for seed in draws]
+    runs = [one_survey(manifest, profile, seed, field_name) for seed in draws]
     for r in runs:
         if r["failed"]:
             bench.fail(f"{name} seed {r['seed']}", r["failed"])
@@ -288,6 +315,7 @@ def measure(
             "cm",
             paper=HAUSDORFF[f"{key}_cm"] if baseline else None,
         )
+    pace_figures(fig, baseline, model)
     stops = [v for r in runs for v in r["true_stops_cm"]]
     fig(
         "true stop at each scan against its planned location, mean",
@@ -309,7 +337,7 @@ def main() -> int:
         type=int,
         nargs="+",
         default=[1, 2, 3],
-        help="one survey per seed for sim and paper (hil: its manifest's draw, once)",
+        help="one survey per seed for sim, spl and paper (hil: its manifest's draw, once)",
     )
     ap.add_argument(
         "--keep",
@@ -319,8 +347,8 @@ def main() -> int:
     args = ap.parse_args()
     bench = Bench("bench_survey")
     details = {
-        name: measure(bench, name, manifest, profile, None if name == "hil" else args.seeds)
-        for name, (manifest, profile) in SURVEYS.items()
+        name: measure(bench, name, manifest, profile, None if name == "hil" else args.seeds, field)
+        for name, (manifest, profile, field) in SURVEYS.items()
         if name in args.only
     }
     # comparisons of surveys that were all kept are kept too, with the date and

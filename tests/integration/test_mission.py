@@ -102,17 +102,6 @@ render_step_deg = 1.0
 status_timeout_s = {2.0 * rtf}  # sim seconds: 2 s of wall time on two busy cores
 [services.nav]
 {fix_age}
-# fine positioning to millimetres is nav-test's and the benchmarks' subject; these
-# surveys need the scan within the arrival tolerance (5 cm), and a shorter settle and
-# centimetre targets save minutes (the re-approach stays: a route resumed after a
-# pause can end centimetres to the side)
-follower.fine_settle_s = 5.0
-follower.fine_settle_max_s = 5.0
-# they test behaviour, not accuracy: the speed they were timed at, twice the default
-follower.max_speed = 0.3
-follower.fine_tolerance_m = 0.02
-follower.fine_heading_tolerance_deg = 1.0
-follower.reapproach_tolerance_m = 0.02
 [services.planner]
 [services.mission]
 settle_s = 1.0

@@ -1,0 +1,110 @@
+"""The same seed gives the same survey whatever the pace and the load: the tiny field
+surveyed by ``phenorover sim`` in lockstep three times (as fast as it goes, capped
+at a real-time factor, and beside a busy loop on both cores) leaves identical
+mission logs: every step's status, times and scan pose to the last bit, and every
+event of the survey."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from common.missionlog import read_log
+from tests.conftest import REPO, free_port
+
+TINY = REPO / "tests" / "data" / "tiny.toml"
+FILES = re.compile(r"summary: .*; files in (\S+)")
+
+
+def manifest(tmp: Path, rtf: float) -> Path:
+    path = tmp / f"lockstep-{rtf:g}.toml"
+    path.write_text(f"""
+machine = "sim"
+clock = "sim"
+lockstep = true
+lockstep_deadline_s = 30.0
+field = "{TINY}"
+run_dir = "{tmp / "runs"}"
+[zenoh]
+listen = ["tcp/127.0.0.1:{free_port()}"]
+[services.sim]
+real_time_factor = {rtf}
+clock_hz = 20.0
+seed = 3
+resume = false
+[services.gnss]
+backend = "sim"
+[services.base]
+backend = "sim"
+rate_hz = 20.0
+[services.scanner]
+backend = "sim"
+storage_dir = "{tmp / "card"}"
+sim_scan_time_s = 5.0
+render_step_deg = 2.0
+[services.nav]
+[services.planner]
+[services.mission]
+register_on_done = false
+""")
+    return path
+
+
+def survey(path: Path) -> Path:
+    """``phenorover sim`` on ``path``: the survey's run folder."""
+    r = subprocess.run(
+        [sys.executable, "-m", "phenorover", "sim", "--manifest", str(path)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=600,
+    )
+    found = FILES.search(r.stdout)
+    assert r.returncode == 0 and found, r.stdout[-3000:] + r.stderr[-3000:]
+    return Path(found.group(1))
+
+
+def what_happened(run: Path) -> tuple[list[Any], list[Any]]:
+    """The survey's steps (all their columns) and its events up to its end, the
+    mission's name (a wall-clock date) taken out."""
+    log = read_log(run / "mission.db")
+    assert log.mission is not None
+    name = log.mission["id"]
+    steps = [
+        tuple(v.replace(name, "M") if isinstance(v, str) else v for v in vars(s).values())
+        for s in log.steps
+    ]
+    events = []
+    for stamp, level, text in log.events:
+        events.append((stamp, level, text.replace(name, "M")))
+        if text == f"mission {name} done":
+            break
+    return steps, events
+
+
+@contextmanager
+def busy_cores(n: int = 2) -> Iterator[None]:
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path: Path) -> None:
+    fast = what_happened(survey(manifest(tmp_path, 1000.0)))
+    steps, events = fast
+    assert len(steps) == 3 and all(s[6] == "done" for s in steps), steps
+    assert events[-1][2] == "mission M done"
+    with busy_cores():
+        loaded = what_happened(survey(manifest(tmp_path, 1000.0)))
+    paced = what_happened(survey(manifest(tmp_path, 2.0)))
+    assert loaded == fast
+    assert paced == fast
