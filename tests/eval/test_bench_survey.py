@@ -24,7 +24,7 @@ def _earlier(path: Path) -> None:
     b = Bench("bench_survey")
     b.commit = "0ldc0de"
     details: dict[str, Any] = {}
-    for name, (manifest, _) in bs.SURVEYS.items():
+    for name, (manifest, _, _) in bs.SURVEYS.items():
         b.figure(f"{bs.title(name, manifest)}, field engr: nav + C2C", 1.0, "cm")
         details[name] = {**FIGURES, "c2c": 0.6 if name == "sim" else 1.4}
     bs.compare(b, details)
