@@ -48,7 +48,7 @@ def test_comparisons_are_kept_only_with_the_surveys_they_compare(
     figures = json.loads(path.read_text())["figures"]
     compared = [f for f in figures if f["name"].startswith(COMPARISONS)]
     names = [f["name"] for f in figures]
-    assert len(names) == len(set(names)) == 3 + len(COMPARISONS)
+    assert len(names) == len(set(names)) == len(bs.SURVEYS) + len(COMPARISONS)
     ours = next(f for f in compared if f["name"] == OURS_AGAINST_BASE)
     if run == "hil":  # sim and paper kept: so is what compares them
         assert {f["commit"] for f in compared} == {"0ldc0de"}
