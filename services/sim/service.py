@@ -25,26 +25,21 @@ from common import keys
 from common.clock import NS
 from common.config import load_manifest
 from common.field import load_field
-from common.messages.base import LaserScan
-from common.messages.core import Array
 from common.messages.sim import (
     RenderReply,
     RenderRequest,
-    SimAntennas,
     SimClock,
-    SimEncoders,
     SimRun,
     SimWheelCommand,
-    TruthPose,
 )
 from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
 from services.sim.barrier import Barrier
 from services.sim.config import SimConfig
-from services.sim.faults import FaultSchedule, describe
+from services.sim.devices import Devices
+from services.sim.faults import FaultSchedule
 from services.sim.imu import ImuModel
-from services.sim.lidar import beam_angles
 from services.sim.plant_truth import write_plant_truth
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
@@ -82,11 +77,7 @@ class SimService:
         self._cmd_ns = -(10**18)
         bus = ctx.bus
         self.clock_pub = bus.publisher(keys.SIM_CLOCK)
-        self.truth_pub = bus.publisher(keys.SIM_TRUTH)
-        self.ant_pub = bus.publisher(keys.SIM_ANTENNAS)
-        self.enc_pub = bus.publisher(keys.SIM_ENCODERS)
-        self.lidar_pub = bus.publisher(keys.SIM_LIDAR)
-        self.imu_pub = bus.publisher(keys.SIM_IMU)
+        self.devices = Devices(ctx, cfg, self.world, self.imu, self.faults)
         bus.subscribe(keys.SIM_WHEELS, self._on_wheels)
         bus.serve(keys.SIM_RENDER, self.render)
         self.barrier: Barrier | None = None
@@ -98,12 +89,6 @@ class SimService:
             bus.serve(keys.SIM_RUN, self._run)
             bus.report("lockstep_late", lambda: self.barrier.late if self.barrier else 0)
         self._tick = SimClock(sim_ns=0)
-        angles = beam_angles(cfg.world.lidar)
-        self._lidar_meta = (
-            float(angles[0]),
-            float(angles[-1]),
-            float(angles[1] - angles[0]) if len(angles) > 1 else 0.0,
-        )
 
     def _resume(self) -> None:
         snap = snapshot.load(self.snap_path, self.world_id)
@@ -206,75 +191,6 @@ class SimService:
         self.state = self.world.step_robot(self.state, v, w, dt, self.rng)
         self.sim_ns += int(dt * NS)
 
-    def _every(self, hz: float, k: int) -> bool:
-        n = max(1, round(self.cfg.clock_hz / hz))
-        return k % n == 0
-
-    def _publish(self, k: int) -> None:
-        s, t = self.state, self.sim_ns
-        for fault, started in self.faults.changes(t / NS):
-            self.ctx.log.warning("%s", describe(fault, started))
-        fx = self.faults.effects(t / NS)
-        # faults change what the devices report only: the same random numbers are
-        # drawn either way, so the true motion does not depend on them
-        ev, ew = self.world.encoder_twist(s, self.rng)
-        if fx.encoders == "zero":
-            ev = ew = 0.0
-        if fx.encoders != "silent":
-            self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id="base_link", v=ev, w=ew))
-        if self._every(self.cfg.gnss_hz, k):
-            a = self.world.gnss_truth(s).astype(float)
-            blocked = self.world.sky_blocked(a)
-            self.ant_pub.put(
-                SimAntennas(
-                    stamp_ns=t,
-                    frame_id="field",
-                    p1=(float(a[0, 0]), float(a[0, 1]), float(a[0, 2])),
-                    p2=(float(a[1, 0]), float(a[1, 1]), float(a[1, 2])),
-                    outage1=fx.outage[0],
-                    outage2=fx.outage[1],
-                    force_float1=fx.force_float[0],
-                    force_float2=fx.force_float[1],
-                    offset1=fx.offset[0],
-                    offset2=fx.offset[1],
-                    blocked1=blocked[0],
-                    blocked2=blocked[1],
-                )
-            )
-        if self.cfg.imu.enabled and self._every(self.cfg.imu.rate_hz, k):
-            self.imu_pub.put(self.imu.read(t / NS, s))
-        if self._every(self.cfg.truth_hz, k):
-            self.truth_pub.put(
-                TruthPose(
-                    stamp_ns=t,
-                    frame_id="field",
-                    x=s.x,
-                    y=s.y,
-                    z=s.z,
-                    roll=s.roll,
-                    pitch=s.pitch,
-                    yaw=s.yaw,
-                    v=s.v,
-                    w=s.w,
-                )
-            )
-        if self._every(self.cfg.lidar_hz, k):
-            ranges = self.world.lidar_scan(s, self.rng, fx.obstacles)
-            lo, hi, inc = self._lidar_meta
-            lc = self.cfg.world.lidar
-            self.lidar_pub.put(
-                LaserScan(
-                    stamp_ns=t,
-                    frame_id="laser",
-                    angle_min=lo,
-                    angle_max=hi,
-                    angle_increment=inc,
-                    range_min=lc.min_range,
-                    range_max=lc.max_range,
-                    ranges=Array.of(ranges),
-                )
-            )
-
     def run(self, stop: threading.Event) -> None:
         saver = None
         if self.cfg.snapshot_s > 0:
@@ -302,7 +218,8 @@ class SimService:
             self._held.clear()
         while not stop.is_set():
             with self._lock:
-                self._publish(k)  # what the devices sense, then the tick expecting it
+                # what the devices sense, then the tick expecting it
+                self.devices.publish(k, self.state, self.sim_ns, self.rng)
                 b = self.barrier
                 self._tick = SimClock(
                     stamp_ns=self.sim_ns,
