@@ -60,6 +60,20 @@ def parse_attachment(data: bytes) -> tuple[str, int] | None:
         return None
 
 
+def caller_attachment(sim_ns: int) -> bytes:
+    """What a lockstep caller attaches to its query: its time."""
+    return f"at\n{sim_ns}".encode()
+
+
+def caller_time(data: bytes | None) -> int | None:
+    """The time a lockstep caller stamped its query with (None: no stamp)."""
+    try:
+        what, ns = data.decode().split("\n") if data is not None else ("", "")
+        return int(ns) if what == "at" else None
+    except (UnicodeDecodeError, ValueError):
+        return None
+
+
 class Inbox:
     """Messages of lockstep publishers, held until the step that expects them; per
     subscription (two subscriptions of one process to a key each get every message)."""

@@ -15,10 +15,9 @@ import contextlib
 import logging
 import sys
 import threading
-import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Generic, TypeVar
+from typing import Any, TypeVar
 
 import msgspec
 import zenoh
@@ -26,7 +25,17 @@ import zenoh.ext
 
 from common.codec import DecodeStats, decode, encode
 from common.keys import ALIVE_ALL, Rpc, Topic
-from common.lockstep import Inbox, LockstepClock, attachment, parse_attachment
+from common.lockstep import (
+    Inbox,
+    LockstepClock,
+    attachment,
+    caller_attachment,
+    caller_time,
+    parse_attachment,
+)
+from common.streams import Latest, Publisher, key_intersects
+
+__all__ = ["Bus", "Latest", "Publisher", "RequestError", "RpcError", "RpcTimeout", "key_intersects"]
 
 M = TypeVar("M")
 Q = TypeVar("Q")
@@ -47,83 +56,6 @@ class RpcTimeout(RpcError):
 
 class RequestError(ValueError):
     """Raised by an RPC handler to answer with an error reply instead of a result."""
-
-
-class Latest(Generic[M]):
-    """Holds the newest message of a subscription; ``wait_for`` blocks on a predicate."""
-
-    def __init__(self) -> None:
-        self._cond = threading.Condition()
-        self._value: M | None = None
-        self.count = 0
-
-    def put(self, msg: M) -> None:
-        with self._cond:
-            self._value = msg
-            self.count += 1
-            self._cond.notify_all()
-
-    def get(self) -> M | None:
-        with self._cond:
-            return self._value
-
-    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
-        """The first value (current or future) satisfying ``pred``, or None on timeout."""
-        result: list[M] = []
-
-        def ok() -> bool:
-            v = self._value
-            if v is not None and pred(v):
-                result.append(v)
-                return True
-            return False
-
-        with self._cond:
-            self._cond.wait_for(ok, timeout)
-        return result[0] if result else None
-
-
-def key_intersects(a: str, b: str) -> bool:
-    """Whether key expressions ``a`` and ``b`` share a key."""
-    return bool(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)))
-
-
-class Publisher(Generic[M]):
-    def __init__(
-        self,
-        pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher,
-        topic: Topic[M],
-        stamp: Callable[[str], bytes | None] = lambda _key: None,
-    ) -> None:
-        self._pub = pub
-        self.topic = topic
-        self._stamp = stamp  # the lockstep attachment of the next message, if any
-
-    def wait_matched(self, timeout: float) -> bool:
-        """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
-        deadline = time.monotonic() + timeout
-        # an advanced publisher (history topics) has no matching status: it caches
-        while not getattr(getattr(self._pub, "matching_status", None), "matching", True):
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.02)
-        return True
-
-    def put(self, msg: M) -> None:
-        if type(msg) is not self.topic.type:
-            raise TypeError(
-                f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
-            )
-        self._pub.put(encode(msg), attachment=self._stamp(self.topic.key))
-
-
-def _caller_ns(tag: zenoh.ZBytes | None) -> int | None:
-    """The sim time a lockstep caller stamped its query with (None: no stamp)."""
-    try:
-        what, ns = tag.to_bytes().decode().split("\n") if tag is not None else ("", "")
-        return int(ns) if what == "at" else None
-    except (UnicodeDecodeError, ValueError):
-        return None
 
 
 class Bus:
@@ -275,7 +207,9 @@ class Bus:
                     if self._clock is None:
                         rep = handler(req)
                     else:
-                        with self._clock.serving(_caller_ns(query.attachment)):
+                        tag = query.attachment
+                        at = caller_time(tag.to_bytes() if tag is not None else None)
+                        with self._clock.serving(at):
                             rep = handler(req)
                 except RequestError as exc:
                     query.reply_err(f"{exc}".encode())
@@ -299,7 +233,7 @@ class Bus:
         Raises RpcError with the service's reason on an error reply, RpcTimeout when
         nobody answers within ``timeout`` seconds.
         """
-        at = None if self._clock is None else f"at\n{self._clock.now_ns()}".encode()
+        at = None if self._clock is None else caller_attachment(self._clock.now_ns())
         replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
         for reply in replies:
             if reply.ok is not None:

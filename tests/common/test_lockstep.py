@@ -6,7 +6,14 @@ from __future__ import annotations
 
 import threading
 
-from common.lockstep import Inbox, LockstepClock, attachment, parse_attachment
+from common.lockstep import (
+    Inbox,
+    LockstepClock,
+    attachment,
+    caller_attachment,
+    caller_time,
+    parse_attachment,
+)
 from common.messages.sim import SimClock
 
 
@@ -142,3 +149,9 @@ def test_an_rpc_is_served_once_the_callee_has_done_the_callers_step() -> None:
     tick(clock, 1, 40)
     assert served.wait(5.0)
     clock.close()
+
+
+def test_a_query_carries_its_callers_time() -> None:
+    assert caller_time(caller_attachment(123_000_000)) == 123_000_000
+    assert caller_time(None) is None
+    assert caller_time(attachment("nav", 1)) is None

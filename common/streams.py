@@ -1,0 +1,85 @@
+"""The two ends of a stream: a typed publisher (numbering its messages in lockstep)
+and a holder of a subscription's newest message."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import Generic, TypeVar
+
+import zenoh
+import zenoh.ext
+
+from common.codec import encode
+from common.keys import Topic
+
+M = TypeVar("M")
+
+
+class Latest(Generic[M]):
+    """Holds the newest message of a subscription; ``wait_for`` blocks on a predicate."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._value: M | None = None
+        self.count = 0
+
+    def put(self, msg: M) -> None:
+        with self._cond:
+            self._value = msg
+            self.count += 1
+            self._cond.notify_all()
+
+    def get(self) -> M | None:
+        with self._cond:
+            return self._value
+
+    def wait_for(self, pred: Callable[[M], bool], timeout: float) -> M | None:
+        """The first value (current or future) satisfying ``pred``, or None on timeout."""
+        result: list[M] = []
+
+        def ok() -> bool:
+            v = self._value
+            if v is not None and pred(v):
+                result.append(v)
+                return True
+            return False
+
+        with self._cond:
+            self._cond.wait_for(ok, timeout)
+        return result[0] if result else None
+
+
+def key_intersects(a: str, b: str) -> bool:
+    """Whether key expressions ``a`` and ``b`` share a key."""
+    return bool(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)))
+
+
+class Publisher(Generic[M]):
+    def __init__(
+        self,
+        pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher,
+        topic: Topic[M],
+        stamp: Callable[[str], bytes | None] = lambda _key: None,
+    ) -> None:
+        self._pub = pub
+        self.topic = topic
+        self._stamp = stamp  # the lockstep attachment of the next message, if any
+
+    def wait_matched(self, timeout: float) -> bool:
+        """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
+        deadline = time.monotonic() + timeout
+        # an advanced publisher (history topics) has no matching status: it caches
+        while not getattr(getattr(self._pub, "matching_status", None), "matching", True):
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def put(self, msg: M) -> None:
+        if type(msg) is not self.topic.type:
+            raise TypeError(
+                f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
+            )
+        self._pub.put(encode(msg), attachment=self._stamp(self.topic.key))
