@@ -105,6 +105,6 @@ def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path
     assert events[-1][2] == "mission M done"
     with busy_cores():
         loaded = what_happened(survey(manifest(tmp_path, 1000.0)))
-    paced = what_happened(survey(manifest(tmp_path, 2.0)))
+    paced = what_happened(survey(manifest(tmp_path, 4.0)))
     assert loaded == fast
     assert paced == fast
