@@ -235,7 +235,9 @@ class LockstepClock:
                 for thunk in thunks:
                     thunk()
                 self._run_threads(msg.sim_ns)
-                self.acked_ns = msg.sim_ns
+                with self._cond:
+                    self.acked_ns = msg.sim_ns
+                    self._cond.notify_all()
             self._started.set()
             self._ack(msg.sim_ns)
 
@@ -264,9 +266,9 @@ class LockstepClock:
         """Around an RPC handler: once this participant has finished the caller's
         step (``caller_ns``, None for a caller off the clock), never during a step."""
         if caller_ns is not None:
-            end = time.monotonic() + self.deadline_s
-            while self.acked_ns < caller_ns and time.monotonic() < end:
-                if self._closed.wait(0.001):
-                    break
+            with self._cond:
+                self._cond.wait_for(
+                    lambda: self.acked_ns >= caller_ns or self._closed.is_set(), self.deadline_s
+                )
         with self.step_lock:
             yield
