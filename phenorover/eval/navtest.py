@@ -6,11 +6,9 @@ from ``deploy/sim.toml``) and the simulator's default error models. Writes
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import sys
-import threading
 import time
 import tomllib
 from pathlib import Path
@@ -19,25 +17,20 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from common import keys
 from common.config import load_manifest
 from common.field import load_field
 from common.messages.nav import (
-    FollowRoute,
     Leg,
-    NavProgress,
     NavState,
-    PoseEstimate,
-    RenewRoute,
 )
-from common.messages.sim import TruthPose
 from common.process import free_loopback_port
-from common.transport import Bus, RpcError
+from common.transport import Bus
 from phenorover.eval import experiments as ex
 from phenorover.eval import profiles
+from phenorover.eval.nav_recorder import Recorder, follow
+from phenorover.eval.navtest_stationary import stationary
 
 SERVICES = ("sim", "base", "gnss", "nav")
-LEASE_S = 3600.0  # the longest a route may be leased for (FollowRoute.lease_s)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -71,61 +64,6 @@ def _manifest(
     path = out / "manifest.toml"
     path.write_text(tomli_w.dumps(m))
     return path
-
-
-class Recorder:
-    """Truth, estimates and progress, as they arrive."""
-
-    def __init__(self, bus: Bus) -> None:
-        self.lock = threading.Lock()
-        self.truth: list[tuple[TruthPose, NavProgress | None]] = []
-        self.poses: list[PoseEstimate] = []
-        self.progress: NavProgress | None = None
-        bus.subscribe(keys.SIM_TRUTH, self._truth)
-        bus.subscribe(keys.NAV_POSE, self._pose)
-        bus.subscribe(keys.NAV_PROGRESS, self._progress)
-
-    def _truth(self, t: TruthPose) -> None:
-        with self.lock:
-            self.truth.append((t, self.progress))
-
-    def _pose(self, p: PoseEstimate) -> None:
-        with self.lock:
-            self.poses.append(p)
-
-    def _progress(self, p: NavProgress) -> None:
-        with self.lock:
-            self.progress = p
-
-
-def _follow(bus: Bus, rec: Recorder, legs: list[Leg], route_id: str, timeout: float) -> NavState:
-    deadline = time.monotonic() + 15
-    while True:
-        try:
-            # an experiment watched by its operator: the longest lease, renewed below
-            # (a slow profile drives the serpentine's 612 m for over an hour)
-            route = FollowRoute(route_id=route_id, legs=legs, lease_s=LEASE_S)
-            bus.call(keys.NAV_CMD, route, timeout=2)
-            break
-        except RpcError:
-            if time.monotonic() > deadline:
-                raise
-    end = time.monotonic() + timeout
-    renewed = time.monotonic()
-    while time.monotonic() < end:
-        if time.monotonic() - renewed > 30.0:  # 30 s of wall time: minutes of sim time
-            with contextlib.suppress(RpcError):
-                bus.call(keys.NAV_CMD, RenewRoute(route_id, LEASE_S), timeout=2)
-            renewed = time.monotonic()
-        p = rec.progress
-        if (
-            p is not None
-            and p.route_id == route_id
-            and p.state in (NavState.ARRIVED, NavState.BLOCKED, NavState.FAILED)
-        ):
-            return p.state
-        time.sleep(0.2)
-    raise TimeoutError(f"route {route_id} not finished within {timeout:.0f} s")
 
 
 def _figures(
@@ -199,7 +137,7 @@ def add_command(p: argparse.ArgumentParser) -> None:
 def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) -> dict[str, Any]:
     _, fld = load_field(load_manifest(args.manifest).field)
     if args.experiment == "stationary":
-        return _stationary(args, bus, rec, out, fld)
+        return stationary(args, bus, rec, out, fld)
     pts = (
         ex.border_points(fld)
         if args.experiment == "border"
@@ -207,7 +145,7 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
     )
     legs = ex.legs_through(pts)
     length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
-    state = _follow(bus, rec, legs, args.experiment, timeout=60 + 20 * length / args.rtf)
+    state = follow(bus, rec, legs, args.experiment, timeout=60 + 20 * length / args.rtf)
     with rec.lock:
         rows = [
             (t, p)
@@ -254,90 +192,3 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
         "estimate_xte_mean_cm": float(100 * np.abs(steered).mean()),
         "estimate_lateral_error_mean_cm": float(100 * np.abs(xte - steered).mean()),
     }
-
-
-def _stationary(
-    args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path, fld: Any
-) -> dict[str, Any]:
-    ox, oy = float(fld.origin_xy[0]), float(fld.origin_xy[1])
-    goal = (float(fld.cross_lanes_x[-2]), float(fld.row_lanes_y[1]))
-    # the heading the robot comes in with, which the stationary figures are against
-    goal_yaw = math.atan2(goal[1] - oy, 0.0)
-    # the last leg ends as the mission's legs to a scan location do: without a
-    # planned heading (services/planner/waypoints.py), the robot holds the leg's
-    legs = ex.legs_through([(ox, oy), (goal[0], oy), goal])
-    _follow(bus, rec, legs, "stationary", timeout=600)
-    with rec.lock:
-        n_pose, n_truth = len(rec.poses), len(rec.truth)
-    t_start = rec.poses[-1].stamp_ns
-    while (rec.poses[-1].stamp_ns - t_start) / 1e9 < args.hold:
-        time.sleep(0.5)
-    with rec.lock:
-        poses = rec.poses[n_pose:]
-        truths = [t for t, _ in rec.truth[n_truth:]]
-    g = (goal[0], goal[1], goal_yaw)
-    est = ex.stationary_stats(
-        np.array([[p.x, p.y] for p in poses]), np.array([p.yaw for p in poses]), g
-    )
-    tru = ex.stationary_stats(
-        np.array([[t.x, t.y] for t in truths]), np.array([t.yaw for t in truths]), g
-    )
-    _stationary_figure(out, poses, g)
-    z_est = float(np.mean([p.z for p in poses]))
-    z_true = float(np.mean([t.z for t in truths]))
-    return {
-        "experiment": "stationary",
-        "hold_s": args.hold,
-        "goal": list(g),
-        # the headline in simulation: where the robot truly stands against the plan
-        "true_stop_to_planned_cm": tru["distance_to_planned_mean_cm"],
-        "true_heading_to_planned_deg": tru["heading_error_mean_abs_deg"],
-        # beside it, the paper's metric (its Figures 21-22): the estimate against the
-        # plan, which the fine positioning itself drives to within 3 mm
-        "paper_estimate_to_planned_cm": est["distance_to_planned_mean_cm"],
-        "paper_heading_residual_deg": est["heading_residual_mean_abs_deg"],
-        "estimate": {
-            **est,
-            "z_mean_m": z_est,
-            "z_sd_cm": float(100 * np.std([p.z for p in poses])),
-        },
-        "truth": {**tru, "z_mean_m": z_true},
-        # where the estimate sits against the truth: what a scan's placement inherits
-        "estimate_error_cm": {
-            "x": float(100 * (np.mean([p.x for p in poses]) - np.mean([t.x for t in truths]))),
-            "y": float(100 * (np.mean([p.y for p in poses]) - np.mean([t.y for t in truths]))),
-            "z": 100 * (z_est - z_true),
-        },
-        # the heading a scan's placement inherits: a tenth of a degree is 1.7 cm at 10 m
-        "estimate_heading_error_deg": est["heading_error_mean_deg"] - tru["heading_error_mean_deg"],
-    }
-
-
-def _stationary_figure(out: Path, poses: list[PoseEstimate], g: tuple[float, float, float]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = np.array([p.stamp_ns / 1e9 for p in poses])
-    t -= t[0]
-    fig, ax = plt.subplots(4, 1, figsize=(8, 8), sharex=True)
-    series = [
-        (100 * (np.array([p.x for p in poses]) - g[0]), "x - planned (cm)"),
-        (100 * (np.array([p.y for p in poses]) - g[1]), "y - planned (cm)"),
-        (
-            np.degrees([math.remainder(p.yaw - g[2], 2 * math.pi) for p in poses]),
-            "heading error (deg)",
-        ),
-        (
-            100 * np.hypot([p.x - g[0] for p in poses], [p.y - g[1] for p in poses]),
-            "distance to planned (cm)",
-        ),
-    ]
-    for a, (y, label) in zip(ax, series, strict=True):
-        a.plot(t, y, lw=0.8)
-        a.set_ylabel(label)
-    ax[-1].set_xlabel("time at the scan location (s)")
-    fig.tight_layout()
-    fig.savefig(out / "stationary.png", dpi=120)
-    plt.close(fig)
