@@ -23,10 +23,8 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from typing import Annotated
 
 import can
-import msgspec
 
 from services.scanner.can_codec import (
     RESOLUTION_DIVISORS,
@@ -44,56 +42,14 @@ from services.scanner.can_codec import (
     Status,
     default_codec,
 )
+from services.scanner.faro_faults import FaroFaults, aimed
+
+__all__ = ["STORAGE_ERROR_CODE", "FaroEmulator", "FaroFaults", "default_scan_duration_s"]
 
 log = logging.getLogger(__name__)
 
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
-
 # error code reported when the completed scan cannot be stored (our choice, see faro.dbc)
 STORAGE_ERROR_CODE = 90
-
-
-class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Faults to inject (the scanner's ``[services.scanner.sim_faults]``). Times are on
-    the emulator's clock (sim seconds in simulation).
-
-    - ``lose_first_acks``: the first N commands are executed but their ACK is lost;
-    - ``lose_first_commands``: the first N commands never reach the device;
-    - ``no_ack``: the device ignores every command (a dead command path); status
-      frames still flow;
-    - ``error_code`` > 0: the scan fails with that code when it reaches
-      ``error_at_pct``;
-    - ``stuck_at_pct``: progress freezes there and the scan never completes;
-    - ``bus_off_for_s`` > 0: the scanner's CAN node goes bus-off right after it
-      acknowledges the Initiate of a scan, for that long: it sends and hears nothing
-      (the scan itself goes on), and the client's sends fail with
-      ``can.CanOperationError``, as python-can reports a bus with no one to
-      acknowledge (see :class:`services.scanner.device.BusOffGate`; across an SLCAN
-      link, :mod:`services.scanner.slcan_device` reports it as an adapter does);
-      once only.
-
-    Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;
-    for ``bus_off`` the first listed scan to start). A command concerns the scan it
-    names (Initiate, End) or the current one (Record/Pause). With ``lose_scan_ids``
-    the first N commands or ACKs *of each listed scan* are lost.
-    """
-
-    lose_first_acks: Annotated[int, msgspec.Meta(ge=0)] = 0
-    lose_first_commands: Annotated[int, msgspec.Meta(ge=0)] = 0
-    no_ack: bool = False
-    error_code: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 0
-    error_at_pct: NonNegative = 50.0
-    stuck_at_pct: NonNegative | None = None
-    error_scan_ids: list[int] = msgspec.field(default_factory=list)
-    stuck_scan_ids: list[int] = msgspec.field(default_factory=list)
-    lose_scan_ids: list[int] = msgspec.field(default_factory=list)
-    no_ack_scan_ids: list[int] = msgspec.field(default_factory=list)
-    bus_off_for_s: NonNegative = 0.0
-    bus_off_scan_ids: list[int] = msgspec.field(default_factory=list)
-
-
-def _aimed(ids: list[int], scan_id: int) -> bool:
-    return not ids or scan_id in ids
 
 
 def default_scan_duration_s(profile: ScanProfile) -> float:
@@ -229,7 +185,7 @@ class FaroEmulator:
             return
         f = self.faults
         sid = frame.scan_id if isinstance(frame, InitiateScan | EndScan) else self.scan_id
-        if f.no_ack and _aimed(f.no_ack_scan_ids, sid):
+        if f.no_ack and aimed(f.no_ack_scan_ids, sid):
             return
         if self._lose(self._lost_commands, f.lose_first_commands, sid):
             log.info("FARO emulator: command lost (fault): %r", frame)
@@ -247,14 +203,14 @@ class FaroEmulator:
         """One more loss of the first ``first`` (per scan with ``lose_scan_ids``)?"""
         ids = self.faults.lose_scan_ids
         key = sid if ids else None
-        if not _aimed(ids, sid) or counts.get(key, 0) >= first:
+        if not aimed(ids, sid) or counts.get(key, 0) >= first:
             return False
         counts[key] = counts.get(key, 0) + 1
         return True
 
     def _maybe_bus_off(self, sid: int) -> None:
         f = self.faults
-        if f.bus_off_for_s > 0 and not self._bus_off_used and _aimed(f.bus_off_scan_ids, sid):
+        if f.bus_off_for_s > 0 and not self._bus_off_used and aimed(f.bus_off_scan_ids, sid):
             self._bus_off_used = True
             self._bus_off_until = self._now() + f.bus_off_for_s
             log.warning("FARO emulator: bus-off (fault) for %g s at scan %d", f.bus_off_for_s, sid)
@@ -295,9 +251,9 @@ class FaroEmulator:
         active = self._active_s + self._now() - self._segment_t0
         progress = min(100.0, 100.0 * active / self._scan_s)
         f = self.faults
-        if f.stuck_at_pct is not None and _aimed(f.stuck_scan_ids, self.scan_id):
+        if f.stuck_at_pct is not None and aimed(f.stuck_scan_ids, self.scan_id):
             progress = min(progress, f.stuck_at_pct, 99.0)
-        failing = f.error_code and _aimed(f.error_scan_ids, self.scan_id)
+        failing = f.error_code and aimed(f.error_scan_ids, self.scan_id)
         if failing and progress >= f.error_at_pct:
             self._progress = f.error_at_pct
             self.state, self.error_code, self._segment_t0 = ScanState.ERROR, f.error_code, None

@@ -1,0 +1,53 @@
+"""Faults the FARO emulator can be told to have (``[services.scanner.sim_faults]``),
+each aimed at every scan or at the scan ids listed."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import msgspec
+
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+
+
+class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Faults to inject (the scanner's ``[services.scanner.sim_faults]``). Times are on
+    the emulator's clock (sim seconds in simulation).
+
+    - ``lose_first_acks``: the first N commands are executed but their ACK is lost;
+    - ``lose_first_commands``: the first N commands never reach the device;
+    - ``no_ack``: the device ignores every command (a dead command path); status
+      frames still flow;
+    - ``error_code`` > 0: the scan fails with that code when it reaches
+      ``error_at_pct``;
+    - ``stuck_at_pct``: progress freezes there and the scan never completes;
+    - ``bus_off_for_s`` > 0: the scanner's CAN node goes bus-off right after it
+      acknowledges the Initiate of a scan, for that long: it sends and hears nothing
+      (the scan itself goes on), and the client's sends fail with
+      ``can.CanOperationError``, as python-can reports a bus with no one to
+      acknowledge (see :class:`services.scanner.device.BusOffGate`; across an SLCAN
+      link, :mod:`services.scanner.slcan_device` reports it as an adapter does);
+      once only.
+
+    Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;
+    for ``bus_off`` the first listed scan to start). A command concerns the scan it
+    names (Initiate, End) or the current one (Record/Pause). With ``lose_scan_ids``
+    the first N commands or ACKs *of each listed scan* are lost.
+    """
+
+    lose_first_acks: Annotated[int, msgspec.Meta(ge=0)] = 0
+    lose_first_commands: Annotated[int, msgspec.Meta(ge=0)] = 0
+    no_ack: bool = False
+    error_code: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 0
+    error_at_pct: NonNegative = 50.0
+    stuck_at_pct: NonNegative | None = None
+    error_scan_ids: list[int] = msgspec.field(default_factory=list)
+    stuck_scan_ids: list[int] = msgspec.field(default_factory=list)
+    lose_scan_ids: list[int] = msgspec.field(default_factory=list)
+    no_ack_scan_ids: list[int] = msgspec.field(default_factory=list)
+    bus_off_for_s: NonNegative = 0.0
+    bus_off_scan_ids: list[int] = msgspec.field(default_factory=list)
+
+
+def aimed(ids: list[int], scan_id: int) -> bool:
+    return not ids or scan_id in ids
