@@ -20,13 +20,13 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Literal, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import msgspec
 import zenoh
 
 from common import keys
-from common.clock import Clock, SimClock, WallClock
+from common.clock import Clock
 from common.config import (
     ConfigError,
     Manifest,
@@ -39,10 +39,10 @@ from common.config import (
 )
 from common.field import FieldError
 from common.lockstep import Inbox, LockstepClock
-from common.messages.sim import ClockAck
 from common.messages.system import Health, Pong
 from common.robot import Robot, default_robot, load_robot
-from common.transport import Bus, key_intersects
+from common.service_clock import Lockstep, service_clock
+from common.transport import Bus
 
 C = TypeVar("C", bound=msgspec.Struct)
 log = logging.getLogger("phenorover")
@@ -205,7 +205,7 @@ def main(
 
     bus = Bus(session, name)
     in_step = clock_kind == "sim" and manifest is not None and manifest.lockstep
-    clock, inbox = _clock(bus, lockstep if in_step else "observer", clock_kind, manifest)
+    clock, inbox = service_clock(bus, lockstep if in_step else "observer", clock_kind, manifest)
     since_ns = time.time_ns()
     run_dir = Path(manifest.run_dir if manifest else "runs")
     # no example field by default: a service that needs one and was given none fails
@@ -260,38 +260,6 @@ def main(
         session.close()
     log.info("%s: stopped", name)
     return code
-
-
-Lockstep = Literal["participant", "observer", "world"]
-
-
-def _clock(
-    bus: Bus, lockstep: Lockstep, kind: str, manifest: Manifest | None
-) -> tuple[Clock, Inbox | None]:
-    """The service's clock: the wall's; the simulator's, followed (an ``observer``,
-    such as the dashboard, or any service when the world does not wait); or in
-    lockstep with it (a ``participant``). The ``world`` (the simulator) numbers its
-    messages and holds those it receives until its step: its own inbox."""
-    if kind != "sim":
-        return WallClock(), None
-    inbox = Inbox(key_intersects) if lockstep != "observer" else None
-    if lockstep == "participant" and manifest is not None and inbox is not None:
-        ack = bus.publisher(keys.SIM_ACK.at(service=bus.name))  # before numbering starts
-
-        def acked(t: int) -> None:
-            ack.put(ClockAck(stamp_ns=t, service=bus.name, sim_ns=t, published=bus.counts()))
-
-        step_clock = LockstepClock(inbox, acked, manifest.lockstep_deadline_s)
-        bus.use_lockstep(inbox, step_clock)
-        bus.report("lockstep_late", lambda: step_clock.late)
-        bus.subscribe(keys.SIM_CLOCK, step_clock.update, immediate=True)
-        return step_clock, inbox
-    if inbox is not None:
-        bus.use_lockstep(inbox)
-    sim_clock = SimClock()
-    bus.report("clock_refused", lambda: sim_clock.refused)
-    bus.subscribe(keys.SIM_CLOCK, sim_clock.update, immediate=True)
-    return sim_clock, inbox
 
 
 def _heartbeat(bus: Bus, name: str, machine: str, since_ns: int, stop: threading.Event) -> None:
