@@ -1,8 +1,8 @@
 """Typed publish/subscribe/query over one Zenoh session.
 
-Only this module (and the service runner) touch Zenoh's API. Messages are msgpack
-encoded by msgspec (:mod:`common.codec`). A message that
-fails to decode is logged once per key with the reason, counted, and dropped: a bad
+Only this module, the two it is made of (:mod:`common.streams`, :mod:`common.rpc`)
+and the service runner touch Zenoh's API. Messages are msgpack encoded by msgspec
+(:mod:`common.codec`). A message that fails to decode is logged once per key with the reason, counted, and dropped: a bad
 peer cannot crash a service. A subscriber callback or RPC handler that raises is
 treated the same way (first traceback per key logged, every one counted): a stream of
 bad input must show in ``health/<service>``, not as a log of tens of thousands of
@@ -19,7 +19,6 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
-import msgspec
 import zenoh
 import zenoh.ext
 
@@ -33,6 +32,7 @@ from common.lockstep import (
     caller_time,
     parse_attachment,
 )
+from common.rpc import RequestError, RpcError, RpcTimeout, answer, first_reply
 from common.streams import Latest, Publisher, key_intersects
 
 __all__ = ["Bus", "Latest", "Publisher", "RequestError", "RpcError", "RpcTimeout", "key_intersects"]
@@ -44,18 +44,6 @@ R = TypeVar("R")
 log = logging.getLogger(__name__)
 # how often a history topic's publisher announces its last sequence number (s)
 HEARTBEAT_S = 0.5
-
-
-class RpcError(RuntimeError):
-    """The service answered a query with an error (its text says what was wrong)."""
-
-
-class RpcTimeout(RpcError):
-    """No service answered a query within its timeout."""
-
-
-class RequestError(ValueError):
-    """Raised by an RPC handler to answer with an error reply instead of a result."""
 
 
 class Bus:
@@ -194,33 +182,11 @@ class Bus:
         """
 
         def work(query: zenoh.Query) -> None:
-            key = str(query.key_expr)
-            try:
-                payload = query.payload.to_bytes() if query.payload is not None else b""
-                try:
-                    req = decode(payload, rpc.request)
-                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-                    self._dropped(key, exc)
-                    query.reply_err(f"bad request on {key}: {exc}".encode())
-                    return
-                try:
-                    if self._clock is None:
-                        rep = handler(req)
-                    else:
-                        tag = query.attachment
-                        at = caller_time(tag.to_bytes() if tag is not None else None)
-                        with self._clock.serving(at):
-                            rep = handler(req)
-                except RequestError as exc:
-                    query.reply_err(f"{exc}".encode())
-                    return
-                except Exception as exc:
-                    self._failed(key, "handler")
-                    query.reply_err(f"internal error in {self.name}: {exc!r}".encode())
-                    return
-                query.reply(query.key_expr, encode(rep))
-            finally:
-                query.drop()
+            serving = None
+            if self._clock is not None:
+                tag = query.attachment
+                serving = self._clock.serving(caller_time(tag.to_bytes() if tag else None))
+            answer(query, rpc, handler, self.name, self._dropped, self._failed, serving)
 
         def on_query(query: zenoh.Query) -> None:
             self._pool.submit(work, query)
@@ -235,16 +201,7 @@ class Bus:
         """
         at = None if self._clock is None else caller_attachment(self._clock.now_ns())
         replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
-        for reply in replies:
-            if reply.ok is not None:
-                try:
-                    result: R = decode(reply.ok.payload.to_bytes(), rpc.reply)
-                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-                    raise RpcError(f"undecodable reply on {rpc.key}: {exc}") from exc
-                return result
-            err = reply.err
-            raise RpcError(err.payload.to_bytes().decode(errors="replace") if err else "error")
-        raise RpcTimeout(f"no reply on {rpc.key} within {timeout:g} s")
+        return first_reply(replies, rpc, timeout)
 
     def watch_alive(self, callback: Callable[[str, bool], object]) -> None:
         """Call ``callback(token_key, alive)`` for every service's liveliness token
