@@ -2,11 +2,11 @@
 
 Only this module, the two it is made of (:mod:`common.streams`, :mod:`common.rpc`)
 and the service runner touch Zenoh's API. Messages are msgpack encoded by msgspec
-(:mod:`common.codec`). A message that fails to decode is logged once per key with the reason, counted, and dropped: a bad
-peer cannot crash a service. A subscriber callback or RPC handler that raises is
-treated the same way (first traceback per key logged, every one counted): a stream of
-bad input must show in ``health/<service>``, not as a log of tens of thousands of
-tracebacks.
+(:mod:`common.codec`). A message that fails to decode is logged once per key with the
+reason, counted, and dropped: a bad peer cannot crash a service. A subscriber
+callback or RPC handler that raises is treated the same way (first traceback per key
+logged, every one counted): a stream of bad input must show in ``health/<service>``,
+not as a log of tens of thousands of tracebacks.
 """
 
 from __future__ import annotations
