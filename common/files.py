@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 
 def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
@@ -31,3 +33,15 @@ def read_regular(path: Path, limit: int, what: str) -> bytes:
     if st.st_size > limit:
         raise ValueError(f"{path}: {st.st_size:,} bytes, more than the {limit:,} {what} may have")
     return path.read_bytes()
+
+
+def finite(v: Any) -> Any:
+    """``v`` (nested dicts, lists, tuples) with NaN and infinities as None: JSON has no
+    NaN, so what goes into a JSON file is written with ``allow_nan=False``."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: finite(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [finite(x) for x in v]
+    return v

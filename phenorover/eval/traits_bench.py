@@ -141,22 +141,18 @@ def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
 
 def record_times(bench: Bench, one: float | None, five: float | None, why: str = "") -> None:
     """``phenorover traits`` wall times (one seed's runs)."""
-    bench.figure(
-        "phenorover traits, one 60-plot survey (wall, the command)",
-        one,
-        "s",
-        goal=Goal("<=", TARGETS["one_s"], "CSF on fewer points (a coarser lowest-point grid)"),
-        headline=True,
-        missing=why,
-    )
-    bench.figure(
-        "phenorover traits, a season of five dates (wall, the command)",
-        five,
-        "s",
-        goal=Goal("<=", TARGETS["season_s"], "the dates read and computed in parallel"),
-        headline=True,
-        missing=why,
-    )
+    for what, value, target, close in (
+        ("one 60-plot survey", one, "one_s", "CSF on fewer points (a coarser lowest-point grid)"),
+        ("a season of five dates", five, "season_s", "the dates read and computed in parallel"),
+    ):
+        bench.figure(
+            f"phenorover traits, {what} (wall, the command)",
+            value,
+            "s",
+            goal=Goal("<=", TARGETS[target], close),
+            headline=True,
+            missing=why,
+        )
 
 
 def record_plan(

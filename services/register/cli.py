@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import signal
 import sys
 import time
@@ -35,7 +34,7 @@ from typing import Any
 import msgspec
 
 from common.config import dump_toml
-from common.files import atomic_write
+from common.files import atomic_write, finite
 from common.robot import RUN_COPY, load_robot
 from services.register.config import RegisterRunConfig, add_config_arguments, resolve
 from services.register.pipeline import Registration, register
@@ -114,23 +113,12 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
     write_report(run, reg, out, outputs, figs)
 
 
-def _finite(v: Any) -> Any:
-    """``v`` with NaN and infinities as None (JSON has no NaN)."""
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _finite(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_finite(x) for x in v]
-    return v
-
-
 def write_report(
     run: RunData, reg: Registration | None, out: Path, outputs: dict[str, Any], figs: list[str]
 ) -> dict[str, Any]:
     """``report.json`` and ``report.md`` from the mission log and the registration."""
     rep = build_report(run, None if reg is None else reg.report, outputs)
-    text = json.dumps(_finite(rep), indent=1, allow_nan=False)
+    text = json.dumps(finite(rep), indent=1, allow_nan=False)
     atomic_write(out / "report.json", lambda p: p.write_text(text))
     atomic_write(out / "report.md", lambda p: p.write_text(markdown(rep, figs)))
     return rep

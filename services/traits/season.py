@@ -26,6 +26,12 @@ from common.canopy import F64
 MAD_TO_SIGMA = 1.4826
 
 
+def robust_sigma(v: npt.ArrayLike) -> float:
+    """The SD of ``v``'s bulk, from its median absolute deviation (outliers aside)."""
+    a = np.asarray(v, dtype=np.float64)
+    return MAD_TO_SIGMA * float(np.median(np.abs(a - np.median(a))))
+
+
 class Offset(msgspec.Struct, frozen=True, kw_only=True):
     """Vertical offset of a survey's ground against a reference survey's (metres).
 
@@ -69,7 +75,7 @@ def _plane(x: F64, y: F64, d: F64) -> tuple[tuple[float, float, float], tuple[fl
     for _ in range(4):
         coef = np.linalg.lstsq(a[keep], d[keep], rcond=None)[0]
         r = d - a @ coef
-        sigma = MAD_TO_SIGMA * float(np.median(np.abs(r[keep] - np.median(r[keep]))))
+        sigma = robust_sigma(r[keep])
         keep = np.abs(r) <= 3 * max(sigma, 1e-6)
     return (float(coef[0]), float(coef[1]), float(coef[2])), (x0, y0)
 
@@ -108,7 +114,7 @@ def vertical_offset(
             f"need {min_cells}): are they the same field?"
         )
     med = float(np.median(diff))
-    sigma = MAD_TO_SIGMA * float(np.median(np.abs(diff - med)))
+    sigma = robust_sigma(diff)
     plane = centre = None
     largest = abs(med)
     if centres is not None:

@@ -23,6 +23,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from common.files import finite
 from common.pointcloud import read_e57
 from common.poses import F64, PoseError, check_pose
 from phenorover.eval.register.paper import compare
@@ -120,16 +121,6 @@ def score_outputs(
         assert t is not None
         trues.append(true_pose(t, f"truth of {name}"))
     return rep, score(scans, poses, trues, sample_points, seed)
-
-
-def _finite(v: Any) -> Any:
-    if isinstance(v, float):
-        return v if math.isfinite(v) else None
-    if isinstance(v, dict):
-        return {k: _finite(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [_finite(x) for x in v]
-    return v
 
 
 def _cm(v: float | None, digits: int = 2) -> str:
@@ -235,7 +226,7 @@ def evaluate(
     }
     dest = out or run_dir
     dest.mkdir(parents=True, exist_ok=True)
-    _write(dest / JSON_NAME, json.dumps(_finite(result), indent=1, allow_nan=False))
+    _write(dest / JSON_NAME, json.dumps(finite(result), indent=1, allow_nan=False))
     _write(dest / MD_NAME, markdown(result, truth))
     return result, truth
 
