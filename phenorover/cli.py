@@ -10,6 +10,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from common.client import (
     DEFAULT_MANIFEST,
@@ -20,6 +21,12 @@ from common.client import (
 from common.config import ConfigError, load_manifest
 from common.service import setup_logging
 from common.status import format_table, query_alive
+from phenorover.cpu import CpuUse, Mark
+
+if TYPE_CHECKING:
+    from common.messages.sim import SimClock
+    from common.streams import Latest
+    from phenorover.launcher import Launcher
 
 log = logging.getLogger("phenorover")
 
@@ -127,10 +134,15 @@ def cmd_sim(args: argparse.Namespace) -> int:
             return 0
         bus = Bus(session, "sim-cli")
         problems: list[str] = []
+        clock = bus.latest(keys.SIM_CLOCK)
         try:
             release = (lambda: bus.call(keys.SIM_RUN, SimRun(), timeout=10)) if held else None
+            start = _mark(launcher, clock)
             final = run_survey(bus, field, args.survey_timeout, problems, args.new, release)
             if final is not None:
+                use = CpuUse.between(start, _mark(launcher, clock))
+                print(use.line(), flush=True)
+                use.write(Path(launcher.manifest.run_dir) / final.mission / "cpu.json")
                 from services.mission.registration import wait_registration
 
                 final = wait_registration(bus, final, args.register_timeout)
@@ -156,6 +168,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         return 1
+
+
+def _mark(launcher: Launcher, clock: Latest[SimClock]) -> Mark:
+    """Now, by the wall, the world's clock and each service's CPU."""
+    c = clock.get()
+    return Mark(time.monotonic(), c.sim_ns / 1e9 if c is not None else 0.0, launcher.cpu())
 
 
 # command -> (module with ``add_command(parser)``, help): imported when the command runs

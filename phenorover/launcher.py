@@ -32,69 +32,18 @@ from typing import IO, Any
 import zenoh
 
 from common import keys
-from common.acl import router_acl
-from common.acl_log import LOG_TARGET, DenialLog
-from common.config import ConfigError, Manifest, decode_section, zenoh_config
+from common.acl_log import DenialLog
+from common.config import ConfigError
 from common.process import die_with_parent
+from phenorover.cpu import cpu_seconds
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
 from phenorover.preflight import preflight
+from phenorover.router import ACL_LOG_FILTER, StdoutFilter, router_config
 from phenorover.watchdog import HeartbeatWatch
 from services import SERVICES, module_of
-from services.base.config import BaseConfig
 
 log = logging.getLogger("phenorover.up")
 acl_log = logging.getLogger("phenorover.acl")
-
-# the router's access-control verdicts: Zenoh logs them at trace level, allowed and
-# denied alike; :class:`DenialLog` keeps the denials
-ACL_LOG_FILTER = f"error,{LOG_TARGET}=trace"
-
-
-def ros2_domains(manifest: Manifest) -> list[int]:
-    """The ROS 2 domains this machine's services speak over rmw_zenoh: the base's,
-    when it drives a ROS 2 base through rmw_zenoh (its section was validated)."""
-    section = manifest.services.get("base")
-    if section is None:
-        return []
-    cfg = decode_section(section, BaseConfig, "[services.base]")
-    return [cfg.ros2_domain] if cfg.backend == "ros2" and cfg.ros2_layout == "rmw_zenoh" else []
-
-
-def router_config(manifest: Manifest) -> zenoh.Config:
-    """This machine's router: its endpoints, TLS and access control from the manifest
-    (local links admitted to the ROS 2 domain its base speaks, :func:`ros2_domains`)."""
-    zs = manifest.zenoh
-    acl = router_acl(zs.access, ros2_domains(manifest)) if zs.access is not None else None
-    return zenoh_config("router", zs.listen, zs.connect, zs.tls, access_control=acl)
-
-
-class StdoutFilter:
-    """Zenoh writes its log to file descriptor 1. While this is open, fd 1 is a pipe
-    read by a thread that hands each line to a :class:`DenialLog` and passes every
-    other line on to the real stdout; :meth:`close` puts the real stdout back."""
-
-    def __init__(self, denials: DenialLog) -> None:
-        sys.stdout.flush()
-        self._denials = denials
-        self._real = os.dup(1)
-        read, write = os.pipe()
-        os.dup2(write, 1)
-        os.close(write)  # fd 1 is now the pipe's only writer: EOF once it is put back
-        self._thread = threading.Thread(target=self._pump, args=(read,), daemon=True)
-        self._thread.start()
-
-    def _pump(self, read: int) -> None:
-        with os.fdopen(read, "rb") as pipe, open(self._real, "wb", closefd=False) as out:
-            for raw in pipe:
-                if not self._denials.feed(raw.decode(errors="replace"), time.monotonic()):
-                    out.write(raw)
-                    out.flush()
-
-    def close(self) -> None:
-        sys.stdout.flush()
-        os.dup2(self._real, 1)
-        self._thread.join(timeout=2.0)
-        os.close(self._real)
 
 
 @dataclasses.dataclass
@@ -105,6 +54,8 @@ class Child:
     started_at: float = 0.0
     next_start: float = 0.0
     backoff: float = 0.5
+    cpu_done: float = 0.0  # CPU seconds of its earlier processes (restarts)
+    cpu_last: float = 0.0  # of the current one, as last read
 
 
 class Launcher:
@@ -130,6 +81,7 @@ class Launcher:
         self.children = {name: Child(name) for name in self.manifest.services if name in SERVICES}
         self._stopping = threading.Event()
         self._out_lock = threading.Lock()
+        self._cpu_lock = threading.Lock()
         self._router: zenoh.Session | None = None
         self._monitor: threading.Thread | None = None
         self._denials: StdoutFilter | None = None
@@ -196,6 +148,7 @@ class Launcher:
             now = time.monotonic()
             for child in self.children.values():
                 proc = child.proc
+                self._read_cpu(child)  # before the poll: a zombie still shows its times
                 if proc is not None and proc.poll() is None:
                     self._kill_if_hung(child, proc, now)
                 if proc is not None and proc.poll() is not None:
@@ -213,6 +166,9 @@ class Launcher:
                     )
                     child.backoff = min(child.backoff * 2, 30.0)
                     child.proc = None
+                    with self._cpu_lock:
+                        child.cpu_done += child.cpu_last
+                        child.cpu_last = 0.0
                 elif proc is None and now >= child.next_start:
                     child.restarts += 1
                     log.warning("restarting service %s (restart %d)", child.name, child.restarts)
@@ -231,6 +187,19 @@ class Launcher:
         proc.kill()  # SIGKILL ends a stopped process too; its exit restarts it below
         with contextlib.suppress(subprocess.TimeoutExpired):  # else reaped next round
             proc.wait(timeout=self.grace_s)
+
+    def _read_cpu(self, child: Child) -> None:
+        seconds = cpu_seconds(child.proc.pid) if child.proc is not None else None
+        if seconds is not None:
+            with self._cpu_lock:
+                child.cpu_last = seconds
+
+    def cpu(self) -> dict[str, float]:
+        """CPU seconds per service since it was first started, restarts included, as
+        the monitor last read them (every 0.1 s; :mod:`phenorover.cpu`; zeros where
+        they cannot be read)."""
+        with self._cpu_lock:
+            return {n: c.cpu_done + c.cpu_last for n, c in self.children.items()}
 
     def pids(self) -> dict[str, int]:
         return {n: c.proc.pid for n, c in self.children.items() if c.proc is not None}

@@ -115,3 +115,15 @@ def scan_pose_errors(run_dir: Path) -> list[tuple[float, float]]:
         horizontal = 100.0 * math.hypot(s.pose_x - truth.x, s.pose_y - truth.y)
         out.append((horizontal, math.degrees(wrap_angle(s.pose_yaw - truth.yaw))))
     return out
+
+
+def true_stops_cm(run_dir: Path) -> list[float]:
+    """For each scan done: how far the robot truly stood (base_link, from the scan's
+    truth file) from its planned location, cm. The mission's arrival tolerance
+    judges this on the real robot; only the simulator can measure it."""
+    out = []
+    for step in read_log(run_dir / "mission.db").steps:
+        truth = find_truth(step.file) if step.status == "done" and step.file else None
+        if truth is not None:
+            out.append(100.0 * math.hypot(truth.x - step.x, truth.y - step.y))
+    return out

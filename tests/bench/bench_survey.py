@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import statistics
 import subprocess
@@ -47,11 +46,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import tomli_w
 
 from common.config import ConfigError, load_manifest, read_toml
-from common.missionlog import read_log
 from phenorover.eval import profiles
 from phenorover.eval.error_models import from_manifest
 from phenorover.eval.register.paper import HAUSDORFF, TABLE1
-from phenorover.eval.register.truth import find_truth
 from phenorover.eval.results import Bench, Goal, spread
 from tests.bench.survey_compare import (
     COMPARISONS,
@@ -78,14 +75,6 @@ POINT_ERROR = Goal(
     "the scans that see no sphere and pair with no neighbour keep their navigation pose, "
     "whose heading is the compass under the crop (about 2 deg a fix) averaged over the scan, "
     "worth a centimetre at 15 m: a longer stand before the scan, or more spheres",
-)
-TRUE_STOP = Goal(
-    "<=",
-    1.0,
-    "the fine phase's last move: it settles until the filter's position SD is 4 mm, and "
-    "a re-approach or creep then lands on an estimate still that far off; where its "
-    "budget of moves runs out it stays where the last one left it (each arrival's moves "
-    "are in the mission log): a tighter fine_settle_sd_m, at minutes per scan",
 )
 
 
@@ -120,18 +109,6 @@ def survey(manifest: Path) -> tuple[dict[str, Any], str]:
         last = (said or r.stderr.strip().splitlines() or ["no output"])[-1]
         return stats, f"phenorover sim exited {r.returncode}: {last.strip()[:300]}"
     return stats, ""
-
-
-def true_stops_cm(run_dir: Path) -> list[float]:
-    """For each scan done: how far the robot truly stood (base_link, from the scan's
-    truth file) from its planned location, cm. The mission's arrival tolerance
-    judges this on the real robot; only the simulator can measure it."""
-    out = []
-    for step in read_log(run_dir / "mission.db").steps:
-        truth = find_truth(step.file) if step.status == "done" and step.file else None
-        if truth is not None:
-            out.append(100.0 * math.hypot(truth.x - step.x, truth.y - step.y))
-    return out
 
 
 def registration(run_dir: Path) -> tuple[dict[str, float], str]:
@@ -224,14 +201,12 @@ def one_survey(
     print(f"{profile} seed {seed}: {why or json.dumps(stats)}", flush=True)
     reg, reg_why = ({}, why) if why else registration(Path(stats["run_dir"]))
     run_dir = Path(stats["run_dir"]) if not why and "run_dir" in stats else None
-    stops = true_stops_cm(run_dir) if run_dir else []
     paced = survey_pace(run_dir, model) if run_dir else {}
     return {
         **stats,
         **reg,
         **paced,
         "seed": seed,
-        "true_stops_cm": stops,
         "failed": why or reg_why,
     }
 
@@ -277,8 +252,6 @@ def measure(
             f"{what}: {label}", value, unit, missing=why, error_models=models, note=note, **kw
         )
 
-    for r in runs:
-        r["true_stop_cm"] = statistics.mean(r["true_stops_cm"]) if r["true_stops_cm"] else None
     fig("locations scanned", "scanned", "", note=f"of {runs[0].get('total')}")
     fig("wall time, services up to registration done", "wall_s", "s")
     fig("distance driven (measured, odometry)", "driven_m", "m")
@@ -315,16 +288,7 @@ def measure(
             "cm",
             paper=HAUSDORFF[f"{key}_cm"] if baseline else None,
         )
-    pace_figures(fig, baseline, model)
-    stops = [v for r in runs for v in r["true_stops_cm"]]
-    fig(
-        "true stop at each scan against its planned location, mean",
-        "true_stop_cm",
-        "cm",
-        note=f"{len(stops)} scans, max {max(stops):.2f} cm" if stops else "",
-        goal=None if baseline else TRUE_STOP,
-        headline=True,
-    )
+    pace_figures(fig, baseline, model, runs)
     return {**means, "runs": runs}
 
 

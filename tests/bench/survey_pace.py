@@ -9,9 +9,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from common.config import read_toml
-from phenorover.eval.pace import pace, scan_pose_errors
+from common.config import load_manifest, read_toml
+from common.robot import load_robot
+from phenorover.cpu import read_use
+from phenorover.eval.pace import pace, scan_pose_errors, true_stops_cm
 from phenorover.eval.results import Goal
+from services import SERVICES
 from services.mission.config import MissionConfig
 from services.nav.follower_config import FollowerConfig
 
@@ -24,6 +27,15 @@ PACE = Goal(
     "the mission log), or a slower cruise than the reference's",
 )
 POSE = Goal("<=", 1.0, "a longer stand at each location (the estimate averages the fixes)")
+# the stated position tolerance: the follower works to 2 cm along the leg and 3 cm
+# across, inside the mission's 5 cm arrival check; by the planner's visibility a stop
+# 30 cm off loses no covered cell (bench_planner)
+TRUE_STOP = Goal(
+    "<=",
+    100 * MissionConfig().arrival_tolerance_m,
+    "the follower's tolerances (fine_tolerance_m, reapproach_tolerance_m), or the "
+    "estimate it stops on: each arrival's moves are in the mission log",
+)
 HEADING = Goal(
     "<=",
     0.165,
@@ -39,15 +51,17 @@ def _section(manifest: Path, name: str) -> dict[str, Any]:
 
 
 def reference_model(manifest: Path) -> tuple[float, float, float, float]:
-    """(cruise speed m/s, turn rate rad/s, turn acceleration rad/s^2, settle s): the
-    follower's and the mission's settings in ``manifest``, their defaults elsewhere."""
-    f = FollowerConfig()
-    over = _section(manifest, "nav").get("follower", {})
+    """(cruise speed m/s, turn rate rad/s, turn acceleration rad/s^2, settle s) of the
+    physical reference: the follower's cruise speed in ``manifest``; the turns at the
+    robot's own limits (its description), not the follower's; the mission's settle
+    before a scan. Raises ConfigError on a bad manifest or robot description."""
+    speed = _section(manifest, "nav").get("follower", {}).get("max_speed")
     settle = _section(manifest, "mission").get("settle_s", MissionConfig().settle_s)
+    limits = load_robot(load_manifest(manifest).robot).limits
     return (
-        float(over.get("max_speed", f.max_speed)),
-        float(over.get("max_turn_rate", f.max_turn_rate)),
-        float(over.get("max_turn_accel", f.max_turn_accel)),
+        float(FollowerConfig().max_speed if speed is None else speed),
+        limits.max_turn_rate,
+        limits.max_turn_accel,
         float(settle),
     )
 
@@ -64,14 +78,26 @@ def survey_pace(run_dir: Path, model: tuple[float, float, float, float]) -> dict
             "pace_ratio": p.ratio,
             "scanning_s": p.scanning_s,
         }
+    stops = true_stops_cm(run_dir)
+    out["true_stops_cm"] = stops
+    out["true_stop_cm"] = statistics.mean(stops) if stops else None
+    use = read_use(run_dir / "cpu.json")
+    if use is not None:
+        rates = use.per_sim_s()
+        out |= {f"cpu_{name}": rate for name, rate in rates.items()}
+        out["cpu_total"] = sum(rates.values()) if rates else None
+        out["survey_wall_s"] = use.wall_s
     if errors:
         out["scan_pose_cm"] = statistics.mean(h for h, _ in errors)
         out["scan_heading_deg"] = statistics.mean(abs(d) for _, d in errors)
     return out
 
 
-def pace_figures(fig: Callable[..., None], baseline: bool, model: tuple[float, ...]) -> None:
-    """The figures, through ``bench_survey``'s ``fig(label, key, unit, note, **kw)``."""
+def pace_figures(
+    fig: Callable[..., None], baseline: bool, model: tuple[float, ...], runs: list[dict[str, Any]]
+) -> None:
+    """The figures of ``runs`` (:func:`survey_pace` of each), through ``bench_survey``'s
+    ``fig(label, key, unit, note, **kw)``."""
     speed, rate, accel, settle = model
     ref = (
         f"the planned route at {speed:g} m/s, each turn in place at {rate:g} rad/s "
@@ -97,4 +123,18 @@ def pace_figures(fig: Callable[..., None], baseline: bool, model: tuple[float, .
         "scan_heading_deg",
         "deg",
         goal=None if baseline else HEADING,
+    )
+    cpu = "CPU seconds per simulated second over the survey (the launcher's reading of /proc)"
+    fig(cpu + ", all services", "cpu_total", "s/s")
+    for name in [n for n in SERVICES if any(f"cpu_{n}" in r for r in runs)]:
+        fig(f"{cpu}: {name}", f"cpu_{name}", "s/s")
+    fig("wall time of the survey itself (mission started to done)", "survey_wall_s", "s")
+    stops = [v for r in runs for v in r.get("true_stops_cm", [])]
+    fig(
+        "true stop at each scan against its planned location, mean",
+        "true_stop_cm",
+        "cm",
+        note=f"{len(stops)} scans, max {max(stops):.2f} cm" if stops else "",
+        goal=None if baseline else TRUE_STOP,
+        headline=True,
     )

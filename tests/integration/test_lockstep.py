@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from common.missionlog import read_log
+from phenorover.cpu import read_use
 from tests.conftest import REPO, free_port
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
@@ -99,8 +100,14 @@ def busy_cores(n: int = 2) -> Iterator[None]:
 
 
 def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path: Path) -> None:
-    fast = what_happened(survey(manifest(tmp_path, 1000.0)))
+    first = survey(manifest(tmp_path, 1000.0))
+    fast = what_happened(first)
     steps, events = fast
+    # what each service cost over the survey, from the launcher's reading of /proc
+    use = read_use(first / "cpu.json")
+    assert use is not None and use.sim_s > 0
+    assert set(use.cpu_s) == {"sim", "base", "gnss", "scanner", "nav", "planner", "mission"}
+    assert all(c > 0 for c in use.cpu_s.values()), use
     assert len(steps) == 3 and all(s[6] == "done" for s in steps), steps
     assert events[-1][2] == "mission M done"
     with busy_cores():

@@ -34,8 +34,8 @@ from common.config import zenoh_config
 from common.messages.base import Twist
 from common.ros2.wire import dds_type_name
 from common.transport import Bus
-from phenorover.launcher import ros2_domains, router_config
 from phenorover.preflight import validate
+from phenorover.router import ros2_domains, router_config
 from tests.conftest import REPO, Procs, free_port, record
 from tests.integration.test_tls import make_certs
 

@@ -20,8 +20,8 @@ from common.certs import issue_files
 from common.config import AccessConfig, TlsConfig, zenoh_config
 from common.messages.mission import MissionEvent
 from common.transport import Bus
-from phenorover.launcher import router_config
 from phenorover.preflight import validate
+from phenorover.router import router_config
 from tests.conftest import REPO, Procs, free_port, record
 from tests.integration.test_tls import make_certs
 
