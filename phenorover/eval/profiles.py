@@ -54,6 +54,12 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "fine": False,
                 # the paper states no driving speed; the calibration assumed 0.5 m/s
                 "max_speed": 0.5,
+                # turns in place under a proportional law, as the calibration drove
+                # them (the braking profile never binds at this gain and rate)
+                "max_turn_rate": 0.6,
+                "max_turn_accel": 1.5,
+                "rotate_gain": 1.5,
+                "turn_braking": 1.0,
                 # the paper's robot scanned wherever its navigation stopped it: our
                 # arrival check (5 cm) would skip its scans, so it is widened
                 "arrival_tolerance_m": PAPER_ARRIVAL_M,

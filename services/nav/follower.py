@@ -131,11 +131,11 @@ class Follower:
         return current + max(-rate * dt, min(rate * dt, target - current))
 
     def _rotate(self, err: float, dt: float) -> float:
+        """The turn rate toward a heading ``err`` rad away (see FollowerConfig)."""
         c = self.cfg
-        w = max(-c.max_turn_rate, min(c.max_turn_rate, c.rotate_gain * err))
-        if abs(w) < c.min_turn_rate:
-            w = math.copysign(c.min_turn_rate, err)
-        return self._ramp(w, self._w, c.max_turn_accel, dt)
+        brake = math.sqrt(2.0 * c.turn_braking * c.max_turn_accel * abs(err))
+        w = max(c.min_turn_rate, min(c.max_turn_rate, c.rotate_gain * abs(err), brake))
+        return self._ramp(math.copysign(w, err), self._w, c.max_turn_accel, dt)
 
     def _remaining(self, x: float, y: float) -> float:
         leg = self.legs[self.leg]

@@ -41,9 +41,16 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     predict_s: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.15
     max_speed: Pos = 0.5
     max_accel: Pos = 0.5
-    max_turn_rate: Pos = 0.6
-    max_turn_accel: Pos = 1.5
-    rotate_gain: Pos = 1.5
+    # a turn in place runs at up to ``max_turn_rate``, slowing as it nears its heading
+    # at the lowest of ``rotate_gain`` times the error and the rate it can still brake
+    # from at ``turn_braking`` of ``max_turn_accel`` (a margin for the drivetrain's
+    # lag): the turn takes about its physical time, where a proportional law alone
+    # spends seconds in its exponential tail (four right angles at these limits:
+    # 8.0 s against 12.2 s and a physical 7.6 s, tests/nav/test_follower.py)
+    max_turn_rate: Pos = 1.2
+    max_turn_accel: Pos = 2.0
+    rotate_gain: Pos = 3.0
+    turn_braking: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.5
     min_turn_rate: Pos = 0.04
     heading_tolerance_deg: Pos = 2.0
     goal_tolerance_m: Pos = 0.02

@@ -247,3 +247,36 @@ def test_a_leg_started_beside_its_line_is_back_on_it_within_a_metre_at_speed() -
     assert first_drive_yaw is not None and math.degrees(first_drive_yaw) < -5.0
     assert after_a_metre and max(after_a_metre) < 0.01
     assert f.state == NavState.ARRIVED
+
+
+def rotating_seconds(cfg: FollowerConfig) -> float:
+    """Seconds spent turning in place over two lane changes (four right angles),
+    around the lagging unicycle of :func:`run_lagging`."""
+    f = Follower(cfg)
+    legs = [(0, 0, 12, 0), (12, 0, 12, 0.8), (12, 0.8, 0, 0.8), (0, 0.8, 0, 1.6), (0, 1.6, 6, 1.6)]
+    f.start("lanes", [Leg(x0=a, y0=b, x1=c, y1=d) for a, b, c, d in legs])
+    x = y = yaw = v = w = 0.0
+    dt, tau, turning = 0.05, 0.15, 0.0
+    for k in range(int(300 / dt)):
+        c = f.step(k * dt, x, y, yaw, True, False)
+        if c.event:
+            assert c.event == "arrived" and math.hypot(x - 6, y - 1.6) < 0.05
+            return turning
+        turning += dt if c.state == NavState.ROTATING else 0.0
+        v += (c.v - v) * (1 - math.exp(-dt / tau))
+        w += (c.w - w) * (1 - math.exp(-dt / tau))
+        x, y = x + v * dt * math.cos(yaw), y + v * dt * math.sin(yaw)
+        yaw = wrap_angle(yaw + w * dt)
+    raise AssertionError("the route did not end")
+
+
+def test_a_turn_in_place_takes_about_its_physical_time() -> None:
+    cfg = FollowerConfig()
+    rate, accel = cfg.max_turn_rate, cfg.max_turn_accel
+    assert math.pi / 2 > rate * rate / accel  # it reaches its rate: a trapezoid
+    physical = 4 * (math.pi / 2 / rate + rate / accel)
+    took = rotating_seconds(cfg)
+    assert took <= 1.25 * physical, (took, physical)
+    # a proportional law alone at the same limits spends seconds in its tail
+    tail = rotating_seconds(FollowerConfig(rotate_gain=1.5, turn_braking=1.0))
+    assert tail > 1.4 * took, (tail, took)
