@@ -26,6 +26,7 @@ from phenorover.cpu import CpuUse, Mark
 if TYPE_CHECKING:
     from common.messages.sim import SimClock
     from common.streams import Latest
+    from common.transport import Bus
     from phenorover.launcher import Launcher
 
 log = logging.getLogger("phenorover")
@@ -143,6 +144,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 use = CpuUse.between(start, _mark(launcher, clock))
                 print(use.line(), flush=True)
                 use.write(Path(launcher.manifest.run_dir) / final.mission / "cpu.json")
+                _idle(bus)
                 from services.mission.registration import wait_registration
 
                 final = wait_registration(bus, final, args.register_timeout)
@@ -168,6 +170,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         return 1
+
+
+def _idle(bus: Bus) -> None:
+    """Pace the world at real time from now on: its robot only stands while the scans
+    are registered, and the registration gets the CPU the world's speed took."""
+    from common import keys
+    from common.messages.sim import SimRun
+    from common.rpc import RpcError
+
+    try:
+        bus.call(keys.SIM_RUN, SimRun(real_time_factor=1.0), timeout=10)
+    except RpcError as exc:  # the registration only runs slower
+        print(f"phenorover sim: the world kept its pace: {exc}", file=sys.stderr)
 
 
 def _mark(launcher: Launcher, clock: Latest[SimClock]) -> Mark:

@@ -35,7 +35,12 @@ class SimClock(Message, frozen=True, kw_only=True):
 
 
 class SimRun(Message, frozen=True, kw_only=True):
-    """Let a simulator started held (``start_held``) step its world."""
+    """Let a simulator started held (``start_held``) step its world; with
+    ``real_time_factor``, pace it at that from now on (a world whose robot only
+    stands, while its scans are registered, needs no speed and leaves the CPU to
+    the registration)."""
+
+    real_time_factor: Annotated[float, msgspec.Meta(gt=0, le=1000)] | None = None
 
 
 class ClockAck(Message, frozen=True, kw_only=True):

@@ -82,11 +82,12 @@ class SimService:
         bus.serve(keys.SIM_RENDER, self.render)
         self.barrier: Barrier | None = None
         self._held = threading.Event()
+        self.real_time_factor = cfg.real_time_factor  # paced at; SIM_RUN may change it
+        bus.serve(keys.SIM_RUN, self._run)
         if ctx.inbox is not None and ctx.manifest is not None:
             self.barrier = Barrier(bus, load_manifest(ctx.manifest).lockstep_deadline_s)
             if cfg.start_held:
                 self._held.set()
-            bus.serve(keys.SIM_RUN, self._run)
             bus.report("lockstep_late", lambda: self.barrier.late if self.barrier else 0)
         self._tick = SimClock(sim_ns=0)
 
@@ -162,8 +163,11 @@ class SimService:
             render_s=time.monotonic() - t0,
         )
 
-    def _run(self, _req: SimRun) -> SimClock:
-        """Let a world started held step."""
+    def _run(self, req: SimRun) -> SimClock:
+        """Let a world started held step, at the real-time factor asked for if any."""
+        if req.real_time_factor is not None and req.real_time_factor != self.real_time_factor:
+            self.ctx.log.info("real-time factor %g from now on", req.real_time_factor)
+            self.real_time_factor = req.real_time_factor
         self._held.clear()
         return self._tick
 
@@ -211,7 +215,6 @@ class SimService:
 
     def _loop(self, stop: threading.Event) -> None:
         dt = 1.0 / self.cfg.clock_hz
-        wall_dt = dt / self.cfg.real_time_factor
         t_next = time.monotonic()
         k = 0
         if self.sim_ns > 0:  # a world carried on from its snapshot is not held again
@@ -224,7 +227,7 @@ class SimService:
                 self._tick = SimClock(
                     stamp_ns=self.sim_ns,
                     sim_ns=self.sim_ns,
-                    real_time_factor=self.cfg.real_time_factor,
+                    real_time_factor=self.real_time_factor,
                     step=-1 if b is None else k,
                     expect={} if b is None else b.expect(self.ctx.name, self.ctx.bus.counts()),
                 )
@@ -237,7 +240,7 @@ class SimService:
             with self._lock:
                 self._step(dt)
             k += 1
-            t_next += wall_dt
+            t_next += dt / self.real_time_factor
             delay = t_next - time.monotonic()
             if delay > 0:
                 if stop.wait(delay):
