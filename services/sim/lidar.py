@@ -61,12 +61,25 @@ def scan(
 ) -> F32:
     """One sweep from the robot at ``state`` of a lidar at ``mount`` (default: the
     shipped robot's): ranges (n_beams,) float32, inf = none."""
+    return noisy(
+        true_ranges(scene, lidar_pose(state, mount or default_robot().lidar), cfg), cfg, rng
+    )
+
+
+def true_ranges(scene: Scene, pose: F64, cfg: LidarConfig) -> F64:
+    """The exact distances (n_beams,) float64, inf = none, of a sweep from the lidar at
+    ``pose`` (4x4, field <- lidar, :func:`lidar_pose`)."""
     if cfg.max_range <= cfg.min_range:
         raise ValueError(f"lidar max_range={cfg.max_range} <= min_range={cfg.min_range}")
     a = beam_angles(cfg)
     local = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], axis=1)
-    m = lidar_pose(state, mount or default_robot().lidar)
-    t, _, _ = scene.cast(m[:3, 3], local @ m[:3, :3].T, cfg.max_range)
+    t, _, _ = scene.cast(pose[:3, 3], local @ pose[:3, :3].T, cfg.max_range)
+    return t
+
+
+def noisy(t: F64, cfg: LidarConfig, rng: np.random.Generator) -> F32:
+    """What the lidar reports of the exact distances ``t``: ranges with its noise,
+    none outside its range (float32, inf)."""
     r = t + cfg.sigma * rng.standard_normal(len(t))
     r = np.where(np.isfinite(t) & (r >= cfg.min_range), np.minimum(r, cfg.max_range), np.inf)
     return r.astype(np.float32)

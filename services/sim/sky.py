@@ -33,13 +33,34 @@ class SkyMask:
         az = (np.arange(n_azimuths) + 0.5) * (2 * math.pi / n_azimuths)
         self._dir = np.stack([np.cos(az), np.sin(az)], axis=1)  # (A, 2)
         self._sin_cut = math.sin(math.radians(cutoff_deg))
+        cut = math.radians(cutoff_deg)
+        self._cot_cut = math.cos(cut) / math.sin(cut) if cut > 0 else math.inf
+        # the last few antenna positions and their shares: a standing robot asks the
+        # same question every epoch (two antennas, so two entries)
+        self._memo: dict[tuple[float, float, float], float] = {}
 
     def blocked(self, p: npt.ArrayLike) -> float:
         """Share (0-1) of the sky above the cutoff hidden from an antenna at ``p``
         (x, y, z in the field frame)."""
         x, y, z = (float(v) for v in np.asarray(p, dtype=np.float64).ravel()[:3])
+        key = (x, y, z)
+        share = self._memo.get(key)
+        if share is None:
+            share = self._blocked(x, y, z)
+            if len(self._memo) >= 4:
+                self._memo.clear()
+            self._memo[key] = share
+        return share
+
+    def _blocked(self, x: float, y: float, z: float) -> float:
         rise = self._top - z  # (P,) how far each plot's top stands above the antenna
-        near = rise > 0.0
+        # a plot further than rise / tan(cutoff) (its box's nearest point) stays below
+        # the cutoff along every azimuth, so it cannot change the share: left out
+        gap = np.hypot(
+            np.maximum(np.maximum(self._lo[:, 0] - x, x - self._hi[:, 0]), 0.0),
+            np.maximum(np.maximum(self._lo[:, 1] - y, y - self._hi[:, 1]), 0.0),
+        )
+        near = (rise > 0.0) & (gap < rise * self._cot_cut)
         if not near.any():
             return 0.0
         lo, hi, rise = self._lo[near], self._hi[near], rise[near]

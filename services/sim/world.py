@@ -143,6 +143,7 @@ class World:
         plots[:, 2] = self.terrain.hmin - 0.5
         plots[:, 5] += self.terrain.hmax
         plot_boxes = np.column_stack([plots, np.full(len(plots), PLOT)])
+        self._lidar_memo: tuple[bytes, F64] | None = None  # (pose, true ranges)
         self.lidar_scene = Scene(
             self.terrain, None, spheres, cyls, np.vstack([plot_boxes, ob_boxes])
         )
@@ -269,6 +270,7 @@ class World:
         injected fault, see :mod:`services.sim.faults`); the same random numbers are
         drawn with or without them."""
         scene = self.lidar_scene
+        pose = lidar_mod.lidar_pose(state, self.robot.lidar)
         if transient:
             boxes, cyls = _obstacle_arrays(list(transient), self.terrain)
             scene = dataclasses.replace(
@@ -276,7 +278,14 @@ class World:
                 boxes=np.vstack([scene.boxes, boxes]),
                 cylinders=np.vstack([scene.cylinders, cyls]),
             )
-        return lidar_mod.scan(scene, state, self.cfg.lidar, rng, self.robot.lidar)
+            return lidar_mod.noisy(
+                lidar_mod.true_ranges(scene, pose, self.cfg.lidar), self.cfg.lidar, rng
+            )
+        # a standing robot's lidar sees the same world from the same pose: cast once
+        key = pose.tobytes()
+        if self._lidar_memo is None or self._lidar_memo[0] != key:
+            self._lidar_memo = (key, lidar_mod.true_ranges(scene, pose, self.cfg.lidar))
+        return lidar_mod.noisy(self._lidar_memo[1], self.cfg.lidar, rng)
 
     def truth_points(self, spacing: float = 0.05) -> tuple[F64, U8]:
         """A dense, deterministic sample of every surface with labels, for scoring

@@ -64,6 +64,14 @@ def test_lidar_sees_obstacle_and_plots(spl):
     lx = w.robot.lidar.x
     assert abs(r[540] - (3.0 - 0.1 - 1.0 - lx)) < 0.1
     assert np.isfinite(r).sum() > 100
+    # standing, the sweep is cast once and only its noise drawn again: the same as
+    # a world that casts it afresh, with the same random numbers
+    again = w.lidar_scan(state, np.random.default_rng(1))
+    fresh = World(layout, field, cfg).lidar_scan(state, np.random.default_rng(1))
+    np.testing.assert_array_equal(again, fresh)
+    assert not np.array_equal(again, r)
+    moved = w.lidar_scan(w.settle(RobotState(x=1.5, y=0.4, yaw=0.0)), np.random.default_rng(1))
+    assert abs(moved[540] - (again[540] - 0.5)) < 0.1
 
 
 def test_gnss_truth_and_scanner_pose(spl_world):
