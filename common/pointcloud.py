@@ -104,18 +104,35 @@ def read_e57(path: str | Path) -> list[PosedScan]:
     return out
 
 
-def voxel_merge(scans: Sequence[PosedScan], voxel: float) -> tuple[F64, F32, npt.NDArray[np.int64]]:
+Merged = tuple[F64, F32, npt.NDArray[np.int64]]
+
+
+def voxel_merge(scans: Sequence[PosedScan], voxel: float) -> Merged:
     """All scans in the field frame, keeping the first point of every ``voxel`` cube
     (m; 0 keeps all): points (N, 3), intensity (N,), scan index (N,)."""
     pts = np.vstack([apply(s.pose, s.points) for s in scans])
     inten = np.concatenate([s.intensity for s in scans]).astype(np.float32)
     src = np.concatenate([np.full(len(s.points), k) for k, s in enumerate(scans)]).astype(np.int64)
-    if voxel > 0:
-        key = np.floor((pts - pts.min(axis=0)) / voxel).astype(np.int64)
-        _, first = np.unique(key, axis=0, return_index=True)
-        first.sort()
+    if voxel > 0 and len(pts):
+        first = first_per_voxel(np.floor((pts - pts.min(axis=0)) / voxel).astype(np.int64))
         pts, inten, src = pts[first], inten[first], src[first]
     return pts, inten, src
+
+
+def first_per_voxel(key: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Ascending indices of the first row of every distinct row of ``key`` (N, 3),
+    non-negative voxel indices: ``np.unique(key, axis=0, return_index=True)``, sorted."""
+    dims = [int(v) + 1 for v in key.max(axis=0)]
+    if dims[0] * dims[1] * dims[2] < 2**63:
+        # rows as one integer, in the rows' lexicographic order: unique on a 1-D array
+        # sorts integers, ten times faster than the rows compared field by field
+        flat = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+        _, first = np.unique(flat, return_index=True)
+    else:  # a cloud kilometres across at a millimetre
+        _, first = np.unique(key, axis=0, return_index=True)
+    first.sort()
+    out: npt.NDArray[np.int64] = first.astype(np.int64, copy=False)
+    return out
 
 
 def write_laz(
@@ -128,9 +145,17 @@ def write_laz(
     """Write the merged, voxel-downsampled cloud (field frame, or UTM through
     ``to_utm``; ``epsg`` recorded as the CRS when given) to a LAZ (or LAS, by the
     suffix) file; returns the number of points written."""
+    return write_merged_laz(path, voxel_merge(scans, voxel), to_utm, epsg)
+
+
+def write_merged_laz(
+    path: str | Path, merged: Merged, to_utm: UtmFn | None = None, epsg: int | None = None
+) -> int:
+    """:func:`write_laz` of a cloud already merged by :func:`voxel_merge` (to write it
+    in more than one frame without merging it again)."""
     import laspy
 
-    pts, inten, src = voxel_merge(scans, voxel)
+    pts, inten, src = merged
     if len(pts) == 0:
         raise CloudIOError(f"{path}: no points to write")
     if to_utm is not None:

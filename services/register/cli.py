@@ -66,7 +66,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: Path) -> None:
     """The E57, the LAZ files, the report and its figures (see the module docstring)."""
-    from common.pointcloud import write_e57, write_laz
+    from common.pointcloud import voxel_merge, write_e57, write_merged_laz
     from services.register import figures
 
     out.mkdir(parents=True, exist_ok=True)
@@ -76,10 +76,8 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
     outputs["e57"] = "registered.e57"
     log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
     counts: dict[str, int] = {}
-    atomic_write(
-        out / "registered.laz",
-        lambda p: counts.update(field=write_laz(p, reg.scans, cfg.laz_voxel)),
-    )
+    merged = voxel_merge(reg.scans, cfg.laz_voxel)  # once for both frames
+    atomic_write(out / "registered.laz", lambda p: counts.update(field=write_merged_laz(p, merged)))
     outputs["laz_field"] = "registered.laz"
     layout = None if run.plan is None else run.plan.layout
     if layout is not None and layout.georeferenced:
@@ -89,9 +87,7 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
         epsg = frame.utm.to_epsg()
         atomic_write(
             out / "utm.laz",
-            lambda p: counts.update(
-                utm=write_laz(p, reg.scans, cfg.laz_voxel, frame.field_to_utm, epsg)
-            ),
+            lambda p: counts.update(utm=write_merged_laz(p, merged, frame.field_to_utm, epsg)),
         )
         outputs["laz_utm"] = "utm.laz"
         outputs["utm_epsg"] = epsg

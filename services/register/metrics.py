@@ -177,12 +177,14 @@ def overlap_stats(
     )
 
 
-def cloud_distance(source: F64, reference: F64) -> CloudDistance:
+def cloud_distance(source: F64, reference: F64, tree: cKDTree | None = None) -> CloudDistance:
     """Nearest-neighbour distances from every ``source`` point to ``reference`` (both
-    (N, 3), field frame). Raises ValueError for an empty cloud."""
+    (N, 3), field frame); ``tree``: the k-d tree of ``reference`` when the caller keeps
+    one for several sources (millions of points take seconds to index). Raises
+    ValueError for an empty cloud."""
     if len(source) == 0 or len(reference) == 0:
         raise ValueError(f"cloud distance of empty clouds ({len(source)}, {len(reference)})")
-    d, k = cKDTree(reference).query(source, workers=1)
+    d, k = (cKDTree(reference) if tree is None else tree).query(source, workers=1)
     vec = source - reference[k]
     return CloudDistance(
         count=len(d),

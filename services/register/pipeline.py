@@ -218,6 +218,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
     rmax = cfg.refine.max_range
     full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
     ref_cloud = merged(full, tsol.poses)
+    ref_tree = cKDTree(ref_cloud)  # once for every method scored against it
     clouds = [(pr.points, pr.normals, cKDTree(pr.points)) for pr in prepared]
     # every method's overlap residuals over the same pairs: those navigation put near
     near = select_pairs(nav, cfg.refine.max_pair_distance)
@@ -228,7 +229,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
         if not is_reference:
             pts = point_stats(samples, poses, tsol.poses)
             src = subsample(merged(samples, poses), cfg.cloud_points, rng)
-            cloud = cloud_distance(src, ref_cloud)
+            cloud = cloud_distance(src, ref_cloud, ref_tree)
         return MethodReport(
             targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
             points_vs_reference=pts,

@@ -45,6 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from common.poses import F64, apply, inv
 from services.register.poses import difference, perturb
+from services.register.workers import starmap
 
 log = logging.getLogger(__name__)
 Pos = Annotated[float, msgspec.Meta(gt=0)]
@@ -91,6 +92,8 @@ class RefineConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     nav_sigma_z: Pos = 0.05
     nav_sigma_tilt_deg: Pos = 0.1
     nav_sigma_yaw_deg: Pos = 0.3
+    # scan pairs aligned at once, each in its own single-threaded process (see
+    # .workers: why not OpenMP threads); the poses do not depend on it
     threads: Annotated[int, msgspec.Meta(ge=1)] = 2
     # sphere centres seen by two or more scans join the pose graph (a user has the
     # targets; the paper's C2C did without them); 1 sigma of a fitted centre
@@ -104,15 +107,6 @@ class Prepared:
 
     points: F64
     normals: F64
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class _Subset:
-    points: F64
-    normals: F64
-    cloud: small_gicp.PointCloud
-    tree: small_gicp.KdTree
-    kd: cKDTree
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -137,11 +131,11 @@ def prepare(points: F64, cfg: RefineConfig) -> Prepared:
     (scanner frame). Raises ValueError when fewer than 100 points remain."""
     pts = np.asarray(points, dtype=np.float64)
     pts = pts[np.linalg.norm(pts, axis=1) <= cfg.max_range]
+    # one thread: the same points and normals as with more, in one order (with more
+    # they come in a different order at every run), and no OpenMP barrier to wait at
+    # on a loaded machine (see .workers)
     cloud, _ = small_gicp.preprocess_points(
-        pts,
-        downsampling_resolution=cfg.voxel,
-        num_neighbors=cfg.neighbours,
-        num_threads=cfg.threads,
+        pts, downsampling_resolution=cfg.voxel, num_neighbors=cfg.neighbours, num_threads=1
     )
     if cloud.size() < 100:
         raise ValueError(f"scan has {cloud.size()} points after downsampling (need >= 100)")
@@ -149,7 +143,7 @@ def prepare(points: F64, cfg: RefineConfig) -> Prepared:
     return Prepared(p, np.ascontiguousarray(cloud.normals()[:, :3]))
 
 
-def _common_view(scan: Prepared, other_origin: F64, cfg: RefineConfig) -> _Subset:
+def _common_view(scan: Prepared, other_origin: F64, cfg: RefineConfig) -> Prepared:
     """Points of ``scan`` that a scanner at ``other_origin`` (this scan's frame) sees
     from within ``view_angle_deg`` of this scanner's view, plus ground."""
     q, n = scan.points, scan.normals
@@ -158,11 +152,18 @@ def _common_view(scan: Prepared, other_origin: F64, cfg: RefineConfig) -> _Subse
     b /= np.maximum(np.linalg.norm(b, axis=1), 1e-9)[:, None]
     keep = np.einsum("ij,ij->i", a, b) >= math.cos(math.radians(cfg.view_angle_deg))
     keep |= np.abs(n[:, 2]) >= cfg.ground_normal_z
-    p = np.ascontiguousarray(q[keep])
-    cloud = small_gicp.PointCloud(p)
-    tree = small_gicp.KdTree(cloud, num_threads=cfg.threads)
-    small_gicp.estimate_covariances(cloud, tree, cfg.neighbours, cfg.threads)
-    return _Subset(p, n[keep], cloud, tree, cKDTree(p))
+    return Prepared(np.ascontiguousarray(q[keep]), n[keep])
+
+
+def _with_covariances(
+    points: F64, cfg: RefineConfig
+) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
+    """GICP's input: the points with their local covariances, and their k-d tree (one
+    thread: a pair is one worker's job, see :func:`refine`)."""
+    cloud = small_gicp.PointCloud(points)
+    tree = small_gicp.KdTree(cloud, num_threads=1)
+    small_gicp.estimate_covariances(cloud, tree, cfg.neighbours, 1)
+    return cloud, tree
 
 
 def pair_information(
@@ -192,32 +193,35 @@ def align_pair(
     i: int, j: int, tgt_scan: Prepared, src_scan: Prepared, init_ij: F64, cfg: RefineConfig
 ) -> PairResult:
     """GICP of scan j onto scan i from ``init_ij`` (j -> i), coarse then fine, on the
-    points both see from similar directions."""
+    points both see from similar directions. Single-threaded (see :func:`refine`)."""
     tgt = _common_view(tgt_scan, init_ij[:3, 3], cfg)
     src = _common_view(src_scan, inv(init_ij)[:3, 3], cfg)
+    kd = cKDTree(tgt.points)
     # skip GICP where too little overlaps even within the coarse radius at the start
-    d0, _ = tgt.kd.query(apply(init_ij, src.points), distance_upper_bound=cfg.coarse_correspondence)
+    d0, _ = kd.query(apply(init_ij, src.points), distance_upper_bound=cfg.coarse_correspondence)
     start = float(np.isfinite(d0).mean())
     if start < cfg.min_overlap / 2:
         info = np.zeros((6, 6))
         return PairResult(i, j, init_ij, info, start, math.inf, False, f"overlap {start:.2f}")
+    tgt_cloud, tgt_tree = _with_covariances(tgt.points, cfg)
+    src_cloud, _ = _with_covariances(src.points, cfg)
     t = init_ij
     for dist in (cfg.coarse_correspondence, cfg.fine_correspondence):
         res = small_gicp.align(
-            tgt.cloud,
-            src.cloud,
-            tgt.tree,
+            tgt_cloud,
+            src_cloud,
+            tgt_tree,
             init_T_target_source=t,
             registration_type="GICP",
             max_correspondence_distance=dist,
-            num_threads=cfg.threads,
+            num_threads=1,
             max_iterations=cfg.max_iterations,
             rotation_epsilon=cfg.epsilon,
             translation_epsilon=cfg.epsilon,
         )
         t = np.asarray(res.T_target_source, dtype=np.float64)
     moved = apply(t, src.points)
-    d, _ = tgt.kd.query(moved, distance_upper_bound=cfg.fine_correspondence)
+    d, _ = kd.query(moved, distance_upper_bound=cfg.fine_correspondence)
     ok = np.isfinite(d)
     overlap = float(ok.mean())
     rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else math.inf
@@ -235,7 +239,7 @@ def align_pair(
             reason = f"{names[worst]} correction is {abs(corr[worst]):.1f} nav sigmas"
     sigma = max(cfg.point_sigma, rmse) if math.isfinite(rmse) else cfg.point_sigma
     info = pair_information(
-        tgt.kd, tgt.normals, moved, cfg.fine_correspondence, sigma, cfg.independent_voxel
+        kd, tgt.normals, moved, cfg.fine_correspondence, sigma, cfg.independent_voxel
     )
     return PairResult(i, j, t, info, overlap, rmse, not reason, reason)
 
@@ -330,15 +334,24 @@ def refine(
     targets: list[TargetObservation] | None = None,
 ) -> tuple[list[F64], list[PairResult]]:
     """Refined poses (4x4 field <- scanner) of all scans and the pair results; sphere
-    ``targets`` seen by two or more scans join the pose graph when ``cfg.use_targets``."""
+    ``targets`` seen by two or more scans join the pose graph when ``cfg.use_targets``.
+    The pairs are aligned ``cfg.threads`` at a time, each in its own process
+    (:func:`.workers.starmap`)."""
     if len(clouds) != len(nav):
         raise ValueError(f"{len(clouds)} clouds but {len(nav)} navigation poses")
-    pairs = []
-    for i, j in select_pairs(nav, cfg.max_pair_distance):
-        pr = align_pair(i, j, clouds[i], clouds[j], inv(nav[i]) @ nav[j], cfg)
+    jobs = [
+        (i, j, clouds[i], clouds[j], inv(nav[i]) @ nav[j], cfg)
+        for i, j in select_pairs(nav, cfg.max_pair_distance)
+    ]
+    pairs = starmap(align_pair, jobs, cfg.threads)
+    for pr in pairs:
         log.info(
-            "pair %d-%d: overlap %.2f rmse %.3f m %s", i, j, pr.overlap, pr.rmse, pr.reason or "ok"
+            "pair %d-%d: overlap %.2f rmse %.3f m %s",
+            pr.i,
+            pr.j,
+            pr.overlap,
+            pr.rmse,
+            pr.reason or "ok",
         )
-        pairs.append(pr)
     obs = targets if cfg.use_targets else None
     return optimise_graph(nav, pairs, prior_sigmas(cfg), obs, cfg.target_sigma), pairs

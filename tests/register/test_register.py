@@ -162,6 +162,24 @@ def test_refinement_restores_a_perturbed_pair(lane_scans):
     assert after.mean < 0.01
 
 
+def test_refinement_is_the_same_on_one_or_two_workers(lane_scans):
+    """Each pair is one single-threaded job: where it runs changes nothing, to the bit."""
+    (s0, t0), (s1, t1) = lane_scans
+    nav = [
+        perturb(t0, [0.01, -0.01, 0.02], np.radians([0.05, -0.05, 0.3])),
+        perturb(t1, [-0.02, 0.01, -0.01], np.radians([-0.05, 0.05, -0.4])),
+        perturb(t0, [0.0, 0.02, 0.0], np.radians([0.0, 0.0, 0.2])),  # s0 seen again
+    ]
+    prepared = [prepare(s.points, RefineConfig()) for s in (s0, s1, s0)]
+    one = refine(prepared, nav, RefineConfig(threads=1))
+    two = refine(prepared, nav, RefineConfig(threads=2))
+    assert [(p.i, p.j) for p in two[1]] == [(0, 1), (0, 2), (1, 2)]
+    for a, b in zip(one[1], two[1], strict=True):
+        assert (a.overlap, a.rmse, a.kept, a.reason) == (b.overlap, b.rmse, b.kept, b.reason)
+        assert np.array_equal(a.t_ij, b.t_ij) and np.array_equal(a.info, b.info)
+    assert all(np.array_equal(a, b) for a, b in zip(one[0], two[0], strict=True))
+
+
 def test_pair_information_counts_a_denser_scan_of_the_same_surface_once():
     """Sampling the same surfaces ten times more densely adds no independent evidence:
     with independent_voxel the information stays put, without it it grows tenfold."""

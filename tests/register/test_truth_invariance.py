@@ -55,12 +55,12 @@ def test_outputs_are_the_same_with_and_without_truth_files(
     truths = sorted((tmp_path / "card").glob("*.truth.json"))
     assert truths, "the fixture's scans have no truth files"
     with_truth, without = tmp_path / "with", tmp_path / "without"
-    # one thread: GICP's parallel sums come out in any order, a last bit apart
-    one = ["--set", "register.refine.threads=1"]
-    assert main([str(run), "--out", str(with_truth), *one]) == 0
+    # the default worker processes: each pair is aligned on one thread, so two runs
+    # agree to the last bit whichever worker aligned which pair
+    assert main([str(run), "--out", str(with_truth)]) == 0
     for t in truths:
         t.unlink()
-    assert main([str(run), "--out", str(without), *one]) == 0
+    assert main([str(run), "--out", str(without)]) == 0
 
     names = sorted(p.name for p in with_truth.iterdir())
     assert names == sorted(p.name for p in without.iterdir())
