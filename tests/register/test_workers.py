@@ -7,12 +7,15 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
+import select
+import selectors
 import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
 import pytest
 
@@ -21,19 +24,24 @@ from services.register.workers import WorkerError, starmap
 REPO = Path(__file__).resolve().parents[2]
 
 
-def _mark_and_sleep(path: str, seconds: float) -> None:
-    """A job that says it runs (its worker's pid in ``path``), then takes its time."""
-    tmp = f"{path}.tmp"
-    Path(tmp).write_text(str(os.getpid()))
-    os.replace(tmp, path)
-    time.sleep(seconds)
+def _say_and_block(seconds: float) -> None:
+    """A job that says it runs (its worker's pid, on stdout), then blocks until it is
+    ended (or ``seconds`` pass)."""
+    print(os.getpid(), flush=True)
+    threading.Event().wait(seconds)
 
 
-def _wait_for(cond: Callable[[], bool], timeout: float = 30.0) -> None:
+def _lines(stream: IO[str], n: int, timeout: float = 30.0) -> list[str]:
+    """The next ``n`` lines of ``stream``, each waited for until ``timeout`` s have
+    passed in all."""
     end = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < end, "timed out"
-        time.sleep(0.05)
+    out: list[str] = []
+    with selectors.DefaultSelector() as sel:
+        sel.register(stream, selectors.EVENT_READ)
+        while len(out) < n:
+            assert sel.select(max(end - time.monotonic(), 0.0)), f"{len(out)} of {n} lines"
+            out.append(stream.readline())
+    return out
 
 
 def test_jobs_run_in_other_processes_and_come_back_in_order() -> None:
@@ -62,31 +70,32 @@ def test_a_dead_worker_is_an_error_not_a_hang() -> None:
     assert not multiprocessing.active_children()
 
 
-def test_sigterm_ends_the_workers_at_once(tmp_path: Path) -> None:
-    marks = [tmp_path / f"job{k}" for k in range(2)]
+def test_sigterm_ends_the_workers_at_once() -> None:
     code = (
         "import signal, sys\n"
         "from services.register.workers import starmap\n"
-        "from tests.register.test_workers import _mark_and_sleep\n"
+        "from tests.register.test_workers import _say_and_block\n"
         "signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))\n"  # as the CLI does
         "if __name__ == '__main__':\n"
-        f"    starmap(_mark_and_sleep, [(p, 60.0) for p in {[str(m) for m in marks]!r}], 2)\n"
+        "    starmap(_say_and_block, [(60.0,), (60.0,)], 2)\n"
     )
-    child = subprocess.Popen([sys.executable, "-c", code], cwd=REPO)
+    child = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, text=True
+    )
     try:
-        _wait_for(lambda: all(m.exists() for m in marks))
-        pids = [int(m.read_text()) for m in marks]
+        assert child.stdout is not None
+        pids = [int(line) for line in _lines(child.stdout, 2)]
+        # a pidfd turns readable when its process ends (and never names another one)
+        fds = [os.pidfd_open(p) for p in pids]
         child.send_signal(signal.SIGTERM)
         assert child.wait(timeout=10) == 143
     finally:
         child.kill()
         child.wait()
-
-    def gone(pid: int) -> bool:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return True
-        return False
-
-    _wait_for(lambda: all(gone(p) for p in pids), timeout=5)
+    end = time.monotonic() + 5
+    while fds:
+        ready, _, _ = select.select(fds, [], [], max(end - time.monotonic(), 0.0))
+        assert ready, f"{len(fds)} workers still running 5 s after the SIGTERM"
+        for fd in ready:
+            os.close(fd)
+        fds = [fd for fd in fds if fd not in ready]
