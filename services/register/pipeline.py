@@ -22,6 +22,7 @@ from scipy.spatial import cKDTree
 
 from common.pointcloud import PosedScan, read_e57
 from common.poses import F64, check_pose
+from services.register.graph import TargetObservation, optimise_graph
 from services.register.metrics import (
     CloudDistance,
     OverlapStats,
@@ -36,8 +37,6 @@ from services.register.metrics import (
 )
 from services.register.refine import (
     RefineConfig,
-    TargetObservation,
-    optimise_graph,
     prepare,
     prior_sigmas,
     refine,

@@ -16,12 +16,11 @@ from common.poses import (
     scanner_pose,
     tilt_from_axis_inclinations,
 )
+from services.register.graph import TargetObservation, optimise_graph
 from services.register.metrics import cloud_distance, overlap_stats, point_stats
 from services.register.poses import perturb
 from services.register.refine import (
     RefineConfig,
-    TargetObservation,
-    optimise_graph,
     pair_information,
     prepare,
     prior_sigmas,
