@@ -42,7 +42,7 @@ from services.scanner.can_codec import (
     Status,
     default_codec,
 )
-from services.scanner.faro_faults import FaroFaults, aimed
+from services.scanner.faro_faults import FaroFaults, FaultBook, aimed
 
 __all__ = ["STORAGE_ERROR_CODE", "FaroEmulator", "FaroFaults", "default_scan_duration_s"]
 
@@ -102,10 +102,7 @@ class FaroEmulator:
         self._ids = {k: self._codec.frame_id(k) for k in (InitiateScan, RecordPause, EndScan)}
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        # faults: commands and ACKs lost so far, per scan id (None: not aimed at scans)
-        self._lost_commands: dict[int | None, int] = {}
-        self._lost_acks: dict[int | None, int] = {}
-        self._bus_off_used, self._bus_off_until = False, -float("inf")
+        self._book = FaultBook(self.faults, now)
         self._was_off = False
         # Scan state; only the emulator thread touches it once started.
         self.state = ScanState.IDLE
@@ -187,37 +184,21 @@ class FaroEmulator:
         sid = frame.scan_id if isinstance(frame, InitiateScan | EndScan) else self.scan_id
         if f.no_ack and aimed(f.no_ack_scan_ids, sid):
             return
-        if self._lose(self._lost_commands, f.lose_first_commands, sid):
+        if self._book.lose_command(sid):
             log.info("FARO emulator: command lost (fault): %r", frame)
             return
         result = self._execute(frame)
-        if self._lose(self._lost_acks, f.lose_first_acks, sid):
+        if self._book.lose_ack(sid):
             log.info("FARO emulator: ACK lost (fault) for %r", frame)
         else:
             self._send(Ack(command_id=msg.arbitration_id, result=result))
         self._send_status()
         if isinstance(frame, InitiateScan) and result == AckResult.OK:
-            self._maybe_bus_off(sid)
-
-    def _lose(self, counts: dict[int | None, int], first: int, sid: int) -> bool:
-        """One more loss of the first ``first`` (per scan with ``lose_scan_ids``)?"""
-        ids = self.faults.lose_scan_ids
-        key = sid if ids else None
-        if not aimed(ids, sid) or counts.get(key, 0) >= first:
-            return False
-        counts[key] = counts.get(key, 0) + 1
-        return True
-
-    def _maybe_bus_off(self, sid: int) -> None:
-        f = self.faults
-        if f.bus_off_for_s > 0 and not self._bus_off_used and aimed(f.bus_off_scan_ids, sid):
-            self._bus_off_used = True
-            self._bus_off_until = self._now() + f.bus_off_for_s
-            log.warning("FARO emulator: bus-off (fault) for %g s at scan %d", f.bus_off_for_s, sid)
+            self._book.started(sid)
 
     def bus_off(self) -> bool:
         """Is the scanner's CAN node bus-off (the ``bus_off`` fault) now? Any thread."""
-        return self._now() < self._bus_off_until
+        return self._book.bus_off()
 
     def _execute(self, frame: Frame) -> AckResult:
         now = self._now()

@@ -3,9 +3,13 @@ each aimed at every scan or at the scan ids listed."""
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Callable
 from typing import Annotated
 
 import msgspec
+
+log = logging.getLogger(__name__)
 
 NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
 
@@ -51,3 +55,47 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 
 def aimed(ids: list[int], scan_id: int) -> bool:
     return not ids or scan_id in ids
+
+
+class FaultBook:
+    """What the faults have done so far on one emulator: the commands and ACKs lost
+    per scan id (or in all, when the losses are aimed at no scan), and the one
+    bus-off with its end on the emulator's clock ``now`` (s)."""
+
+    def __init__(self, faults: FaroFaults, now: Callable[[], float]) -> None:
+        self.faults = faults
+        self._now = now
+        self._lost_commands: dict[int | None, int] = {}
+        self._lost_acks: dict[int | None, int] = {}
+        self._bus_off_used, self._bus_off_until = False, -float("inf")
+
+    def lose_command(self, scan_id: int) -> bool:
+        """Is this command, concerning ``scan_id``, lost on its way in?"""
+        return self._lose(self._lost_commands, self.faults.lose_first_commands, scan_id)
+
+    def lose_ack(self, scan_id: int) -> bool:
+        """Is the ACK of this command, concerning ``scan_id``, lost?"""
+        return self._lose(self._lost_acks, self.faults.lose_first_acks, scan_id)
+
+    def _lose(self, counts: dict[int | None, int], first: int, sid: int) -> bool:
+        """One more loss of the first ``first`` (per scan with ``lose_scan_ids``)?"""
+        ids = self.faults.lose_scan_ids
+        key = sid if ids else None
+        if not aimed(ids, sid) or counts.get(key, 0) >= first:
+            return False
+        counts[key] = counts.get(key, 0) + 1
+        return True
+
+    def started(self, scan_id: int) -> None:
+        """Scan ``scan_id`` was acknowledged: the node goes bus-off now if aimed so."""
+        f = self.faults
+        if f.bus_off_for_s > 0 and not self._bus_off_used and aimed(f.bus_off_scan_ids, scan_id):
+            self._bus_off_used = True
+            self._bus_off_until = self._now() + f.bus_off_for_s
+            log.warning(
+                "FARO emulator: bus-off (fault) for %g s at scan %d", f.bus_off_for_s, scan_id
+            )
+
+    def bus_off(self) -> bool:
+        """Is the node bus-off now? Any thread."""
+        return self._now() < self._bus_off_until
