@@ -14,6 +14,8 @@ import json
 import os
 from pathlib import Path
 
+from common.files import atomic_write
+
 _TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
@@ -81,7 +83,8 @@ class CpuUse:
     def write(self, path: Path) -> None:
         """``path`` as JSON: sim_s, wall_s, cpu_s and cpu_per_sim_s per service."""
         body = dataclasses.asdict(self) | {"cpu_per_sim_s": self.per_sim_s()}
-        path.write_text(json.dumps(body, indent=1, sort_keys=True) + "\n")
+        text = json.dumps(body, indent=1, sort_keys=True) + "\n"
+        atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
 def read_use(path: Path) -> CpuUse | None:

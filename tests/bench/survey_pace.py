@@ -9,14 +9,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from common.config import load_manifest, read_toml
+from common.config import decode_section, load_manifest
 from common.robot import load_robot
 from phenorover.cpu import read_use
 from phenorover.eval.pace import pace, scan_pose_errors, true_stops_cm
 from phenorover.eval.results import Goal
 from services import SERVICES
 from services.mission.config import MissionConfig
-from services.nav.follower_config import FollowerConfig
+from services.nav.config import NavConfig
 
 # the acceptance of the pace issue: field time within 1.5 x the physical reference;
 # scan poses within 1.0 cm and a heading no worse than bench_nav's 0.165 deg
@@ -45,25 +45,16 @@ HEADING = Goal(
 )
 
 
-def _section(manifest: Path, name: str) -> dict[str, Any]:
-    services = read_toml(manifest).get("services", {})
-    return dict(services.get(name, {}))
-
-
 def reference_model(manifest: Path) -> tuple[float, float, float, float]:
     """(cruise speed m/s, turn rate rad/s, turn acceleration rad/s^2, settle s) of the
     physical reference: the follower's cruise speed in ``manifest``; the turns at the
     robot's own limits (its description), not the follower's; the mission's settle
     before a scan. Raises ConfigError on a bad manifest or robot description."""
-    speed = _section(manifest, "nav").get("follower", {}).get("max_speed")
-    settle = _section(manifest, "mission").get("settle_s", MissionConfig().settle_s)
-    limits = load_robot(load_manifest(manifest).robot).limits
-    return (
-        float(FollowerConfig().max_speed if speed is None else speed),
-        limits.max_turn_rate,
-        limits.max_turn_accel,
-        float(settle),
-    )
+    m = load_manifest(manifest)
+    nav = decode_section(m.services.get("nav", {}), NavConfig, "[services.nav]")
+    mission = decode_section(m.services.get("mission", {}), MissionConfig, "[services.mission]")
+    limits = load_robot(m.robot).limits
+    return (nav.follower.max_speed, limits.max_turn_rate, limits.max_turn_accel, mission.settle_s)
 
 
 def survey_pace(run_dir: Path, model: tuple[float, float, float, float]) -> dict[str, Any]:
