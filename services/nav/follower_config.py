@@ -45,8 +45,7 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     # at the lowest of ``rotate_gain`` times the error and the rate it can still brake
     # from at ``turn_braking`` of ``max_turn_accel`` (a margin for the drivetrain's
     # lag): the turn takes about its physical time, where a proportional law alone
-    # spends seconds in its exponential tail (four right angles at these limits:
-    # 8.0 s against 12.2 s and a physical 7.6 s, tests/nav/test_follower.py)
+    # spends seconds in its exponential tail (tests/nav/test_follower.py holds both)
     max_turn_rate: Pos = 1.2
     max_turn_accel: Pos = 2.0
     rotate_gain: Pos = 3.0
