@@ -35,6 +35,11 @@ class Receiver(Protocol):
         """Bytes received since the last call; ``b""`` after ~0.5 s without any."""
         ...
 
+    def deliver(self, sink: Callable[[bytes], None]) -> bool:
+        """Hand what arrives to ``sink`` as it arrives, in the receiver's own thread,
+        instead of to :meth:`read`; False when this receiver can only be read."""
+        ...
+
     def close(self) -> None: ...
 
 
@@ -125,6 +130,9 @@ class _Link:
             self._shut()
         log.warning("antenna %d: link to %s lost (%s); reconnecting", *self._who(), reason)
 
+    def deliver(self, sink: Callable[[bytes], None]) -> bool:
+        return False  # a port or a socket is read
+
     def close(self) -> None:
         with contextlib.suppress(OSError):
             self._shut()
@@ -189,8 +197,8 @@ class SimReceiver:
         self.antenna = antenna.id
         self._reach = ReachM2(cfg.rtk, cfg.seed, antenna.id, frame)
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=100)
-        # set: each epoch's text goes straight to it, in the subscriber's thread,
-        # rather than to a reader (the gnss service's, which then starts none)
+        # set (deliver): each epoch's text goes straight to it, in the subscriber's
+        # thread, rather than to a reader
         self.sink: Callable[[bytes], None] | None = None
         bus.subscribe(keys.SIM_ANTENNAS, self._on_truth)
 
@@ -210,6 +218,12 @@ class SimReceiver:
         # nobody reading: drop, as a serial port would overrun
         with contextlib.suppress(queue.Full):
             self._queue.put_nowait(text.encode("ascii"))
+
+    def deliver(self, sink: Callable[[bytes], None]) -> bool:
+        """Each epoch's text to ``sink`` as the simulator's antenna truth comes in (in
+        lockstep at its step), not through a reader's queue."""
+        self.sink = sink
+        return True
 
     def read(self, stop: threading.Event) -> bytes:
         try:

@@ -15,7 +15,7 @@ from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
 from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
 from services.gnss.pairing import EpochPairer
-from services.gnss.receiver import Receiver, SimReceiver, open_receiver
+from services.gnss.receiver import Receiver, open_receiver
 from services.gnss.solution import FixBuilder, heading
 
 
@@ -58,23 +58,22 @@ class GnssService:
                 if fix is not None:
                     self._on_fix(s.time_s, fix)
 
-    def _read(self, rx: Receiver, stop: threading.Event) -> None:
-        builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
+    def _read(self, rx: Receiver, builder: FixBuilder, stop: threading.Event) -> None:
         while not stop.is_set():
             self._feed(rx.antenna, builder, rx.read(stop))
 
     def run(self, stop: threading.Event) -> None:
+        threads = []
         for rx in self.receivers:
-            if isinstance(rx, SimReceiver):
-                # the simulator's: its epochs are taken in as they are delivered (in
-                # lockstep, at their step), not by a thread of their own
-                builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
-                rx.sink = functools.partial(self._feed, rx.antenna, builder)
-        threads = [
-            threading.Thread(target=self._read, args=(rx, stop), name=f"gnss{rx.antenna}")
-            for rx in self.receivers
-            if not isinstance(rx, SimReceiver)
-        ]
+            builder = FixBuilder(rx.antenna, self.cfg.fallback_sigma_m)
+            # a receiver that delivers (the simulator's: in lockstep, at its step) is
+            # taken in as it does; a link is read by a thread of its own
+            if not rx.deliver(functools.partial(self._feed, rx.antenna, builder)):
+                threads.append(
+                    threading.Thread(
+                        target=self._read, args=(rx, builder, stop), name=f"gnss{rx.antenna}"
+                    )
+                )
         for t in threads:
             t.start()
         stop.wait()
