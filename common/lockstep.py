@@ -40,10 +40,12 @@ from common.messages.sim import SimClock as SimClockMsg
 log = logging.getLogger(__name__)
 
 Thunk = Callable[[], None]
-# how long (wall) a step waits for the first message of a publisher it has never heard
-# from: on loopback a message takes well under a millisecond; a subscription Zenoh has
-# not routed yet never gets it
-FIRST_GRACE_S = 0.05
+# how long (wall) the first message of a publisher on a key is waited for, from the
+# first step that expected it: a subscription Zenoh has not routed yet never gets it
+# (it is then taken as it comes, not waited for), while one that is routed gets it
+# in well under a millisecond on loopback, and within this even beside a busy loop
+# on every core (50 ms was not: the first fixes then came a step late)
+FIRST_GRACE_S = 2.0
 
 
 def attachment(service: str, seq: int) -> bytes:
@@ -88,6 +90,8 @@ class Inbox:
         # message has come from at all
         self._received: dict[tuple[int, str], int] = {}
         self._seen: set[tuple[int, str]] = set()
+        # (subscription, name) never seen -> when (monotonic) a step first expected it
+        self._first_expected: dict[tuple[int, str], float] = {}
         self._matches: dict[str, list[int]] = {}
 
     def subscribed(self, key: str) -> int:
@@ -132,20 +136,25 @@ class Inbox:
                 if i in self._fresh:
                     self._received[(i, name)] = max(self._received.get((i, name), 0), n)
             self._fresh.clear()
-            grace = time.monotonic() + FIRST_GRACE_S
+            now = time.monotonic()
+            for name, _ in wanted:
+                if name not in self._seen:
+                    self._first_expected.setdefault(name, now)
 
             def missing() -> list[str]:
-                # a publisher never heard from is waited for only briefly: Zenoh may not
-                # have routed this subscription to it yet (its first messages are lost)
+                # a publisher never heard from is waited for only for a while: Zenoh
+                # may not have routed this subscription to it yet (its first messages
+                # are then lost)
                 now = time.monotonic()
                 return [
                     name[1]
                     for name, n in wanted
-                    if self._received.get(name, 0) < n and (name in self._seen or now < grace)
+                    if self._received.get(name, 0) < n
+                    and (name in self._seen or now < self._first_expected[name] + FIRST_GRACE_S)
                 ]
 
             while (late := missing()) and (left := end - time.monotonic()) > 0:
-                self._cond.wait(min(left, 0.01 if time.monotonic() < grace else 0.5))
+                self._cond.wait(min(left, 0.05))
             due: list[tuple[str, str, int, int, Thunk]] = []
             keep: list[tuple[str, str, int, int, Thunk]] = []
             for item in self._pending:

@@ -63,14 +63,23 @@ class Barrier:
         with self._cond:
             return sorted(self._alive & set(self._acked))
 
-    def wait(self, t_ns: int, resend: Callable[[], None], stop: threading.Event) -> list[str]:
+    def wait(
+        self,
+        t_ns: int,
+        resend: Callable[[], None],
+        stop: threading.Event,
+        everyone: bool = False,
+    ) -> list[str]:
         """Until every participant has acknowledged the step at ``t_ns`` (sending its
-        tick again every ``RESEND_S``): those that never did within the deadline."""
+        tick again every ``RESEND_S``): those that never did within the deadline.
+        ``everyone``: a service whose token is up counts even before its first
+        acknowledgement (the world's first step: each service then starts with it)."""
         end = time.monotonic() + self.deadline_s
         next_send = time.monotonic() + RESEND_S
+        unheard = -1 if everyone else t_ns
         with self._cond:
             while True:
-                late = [s for s in self._alive if self._acked.get(s, t_ns) < t_ns]
+                late = [s for s in self._alive if self._acked.get(s, unheard) < t_ns]
                 now = time.monotonic()
                 if not late or stop.is_set():
                     return []

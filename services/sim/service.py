@@ -178,11 +178,12 @@ class SimService:
         while self._held.is_set() and not stop.wait(0.5):
             self.clock_pub.put(self._tick)
 
-    def _await_step(self, stop: threading.Event) -> None:
+    def _await_step(self, stop: threading.Event, everyone: bool = False) -> None:
         """Lockstep: wait for every participant's acknowledgement of this step, then
-        take in the wheel commands they counted in it."""
+        take in the wheel commands they counted in it (``everyone``: see
+        :meth:`Barrier.wait`)."""
         assert self.barrier is not None and self.ctx.inbox is not None
-        self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop)
+        self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop, everyone)
         expect = self.barrier.expect(self.ctx.name, self.ctx.bus.counts())
         thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
         for thunk in thunks:  # each takes the world's lock itself
@@ -236,6 +237,9 @@ class SimService:
                 self._await_step(stop)
                 if self._held.is_set():
                     self._hold(stop)
+                    # released: the first step waits for every service up, however
+                    # slowly a loaded machine brought it to its first tick
+                    self._await_step(stop, everyone=True)
                     t_next = time.monotonic()
             with self._lock:
                 self._step(dt)

@@ -5,7 +5,11 @@ order before acknowledging it."""
 from __future__ import annotations
 
 import threading
+import time
 
+import pytest
+
+from common import lockstep
 from common.lockstep import (
     Inbox,
     LockstepClock,
@@ -66,6 +70,29 @@ def test_a_message_that_never_comes_is_named_after_the_timeout() -> None:
     inbox.take({"gnss|fix": 1}, 1.0)
     thunks, missing = inbox.take({"gnss|fix": 3}, 0.05)
     assert thunks == [] and missing == ["gnss|fix"]
+
+
+def test_the_first_message_of_a_publisher_is_waited_for_on_a_loaded_machine() -> None:
+    inbox, (sub,) = inbox_with("fix")
+    # never heard from gnss: its first fix still comes a scheduler's while later
+    late = threading.Timer(0.3, inbox.deliver, (sub, "fix", "gnss", 1, lambda: None))
+    late.start()
+    thunks, missing = inbox.take({"gnss|fix": 1}, 5.0)
+    assert len(thunks) == 1 and missing == []
+
+
+def test_a_publisher_never_routed_to_a_subscription_is_waited_for_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(lockstep, "FIRST_GRACE_S", 0.2)
+    inbox, _ = inbox_with("fix")
+    t0 = time.monotonic()
+    thunks, missing = inbox.take({"gnss|fix": 1}, 5.0)
+    assert thunks == [] and missing == [] and time.monotonic() - t0 >= 0.2
+    # its grace is spent: the next steps take its messages as they come, unwaited
+    # (one waited for in vain would be named as missing)
+    thunks, missing = inbox.take({"gnss|fix": 2}, 0.5)
+    assert thunks == [] and missing == []
 
 
 def test_what_was_published_before_a_subscription_is_not_waited_for() -> None:
