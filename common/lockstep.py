@@ -137,9 +137,9 @@ class Inbox:
                     self._received[(i, name)] = max(self._received.get((i, name), 0), n)
             self._fresh.clear()
             now = time.monotonic()
-            for name, _ in wanted:
-                if name not in self._seen:
-                    self._first_expected.setdefault(name, now)
+            for sub_name, _ in wanted:
+                if sub_name not in self._seen:
+                    self._first_expected.setdefault(sub_name, now)
 
             def missing() -> list[str]:
                 # a publisher never heard from is waited for only for a while: Zenoh
