@@ -179,12 +179,17 @@ def align_pair(
     tgt = _common_view(tgt_scan, init_ij[:3, 3], cfg)
     src = _common_view(src_scan, inv(init_ij)[:3, 3], cfg)
     kd = cKDTree(tgt.points)
-    # skip GICP where too little overlaps even within the coarse radius at the start
+    # skip GICP where too little overlaps even within the coarse radius at the start:
+    # to end with ``min_overlap`` of the points within the fine radius, the rest would
+    # have to move by more than the difference of the radii (0.2 m), forty times the
+    # navigation prior's sigma and beyond what the gate lets a pair correct
     d0, _ = kd.query(apply(init_ij, src.points), distance_upper_bound=cfg.coarse_correspondence)
     start = float(np.isfinite(d0).mean())
-    if start < cfg.min_overlap / 2:
+    if start < cfg.min_overlap:
         info = np.zeros((6, 6))
-        return PairResult(i, j, init_ij, info, start, math.inf, False, f"overlap {start:.2f}")
+        radius = cfg.coarse_correspondence
+        why = f"overlap {start:.2f} < {cfg.min_overlap} within {radius} m at the start"
+        return PairResult(i, j, init_ij, info, start, math.inf, False, why)
     tgt_cloud, tgt_tree = _with_covariances(tgt.points, cfg)
     src_cloud, _ = _with_covariances(src.points, cfg)
     t = init_ij

@@ -1,6 +1,7 @@
 import math
 
 import laspy
+import msgspec
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
@@ -21,6 +22,7 @@ from services.register.metrics import cloud_distance, overlap_stats, point_stats
 from services.register.poses import perturb
 from services.register.refine import (
     RefineConfig,
+    align_pair,
     pair_information,
     prepare,
     prior_sigmas,
@@ -177,6 +179,22 @@ def test_refinement_is_the_same_on_one_or_two_workers(lane_scans):
         assert (a.overlap, a.rmse, a.kept, a.reason) == (b.overlap, b.rmse, b.kept, b.reason)
         assert np.array_equal(a.t_ij, b.t_ij) and np.array_equal(a.info, b.info)
     assert all(np.array_equal(a, b) for a, b in zip(one[0], two[0], strict=True))
+
+
+def test_a_pair_overlapping_too_little_at_the_start_is_refused_before_gicp(lane_scans):
+    """Fewer than ``min_overlap`` of the points within the coarse radius at the start
+    cannot end with that share within the fine one: the pair is refused unaligned."""
+    (s0, t0), (s1, t1) = lane_scans
+    cfg = RefineConfig()
+    a, b = prepare(s0.points, cfg), prepare(s1.points, cfg)
+    t_ij = inv(t0) @ t1
+    aligned = align_pair(0, 1, a, b, t_ij, cfg)
+    assert math.isfinite(aligned.rmse)
+    # the same pair, asked for more overlap than lies within 0.3 m of it at the start
+    strict = msgspec.structs.replace(cfg, min_overlap=0.99)
+    refused = align_pair(0, 1, a, b, t_ij, strict)
+    assert not refused.kept and math.isinf(refused.rmse) and "at the start" in refused.reason
+    assert np.array_equal(refused.t_ij, t_ij)
 
 
 def test_pair_information_counts_a_denser_scan_of_the_same_surface_once():
