@@ -61,8 +61,10 @@ def _survey(label: str, compared: str | None = None, ratio: str | None = None) -
 
 ROWS = (
     _profiles("border: mean cross-track error, true pose", ratio=True),
+    _profiles("border: 99th percentile of cross-track error, true pose", compared=False),
     _profiles("border: share of the path below 5 cm"),
     _profiles("serpentine: mean cross-track error, true pose", ratio=True),
+    _profiles("serpentine: 99th percentile of cross-track error, true pose", compared=False),
     _profiles("stationary: estimate against the planned point (the paper's metric)"),
     _profiles("stationary: estimate's heading residual (the paper's metric)"),
     _profiles("stationary: true stop against the planned point", compared=False),
