@@ -68,7 +68,11 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
         },
         # its filter forgets while standing (static process noise): a scan is
         # placed with the mean of its estimates over the scan
-        "mission": {"arrival_tolerance_m": PAPER_ARRIVAL_M, "scan_pose": "mean"},
+        "mission": {
+            "arrival_tolerance_m": PAPER_ARRIVAL_M,
+            "scan_tolerance_m": PAPER_ARRIVAL_M,
+            "scan_pose": "mean",
+        },
         # its C2C without the spheres, and its poses worth what a filter that forgets
         # while standing gives (about 2 cm, against ours' 5 mm)
         "register": {"register": {"refine": {"use_targets": False, "nav_sigma_xy": 0.02}}},

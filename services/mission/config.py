@@ -20,9 +20,13 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     attempts after a scanner error before the location is marked failed.
     ``blocked_retries``: route attempts after navigation reports blocked (or fails)
     before the location is skipped. ``arrival_tolerance_m``: how far the pose estimate
-    may be from the planned location, before a scan and averaged over it (the follower
-    arrives to millimetres; 5 cm is a metre-scale fault's margin, not a target);
-    ``position_retries`` drives to get there. ``lease_s``: the route lease navigation
+    may be from the planned location before a scan starts (the follower arrives to
+    centimetres); ``position_retries`` drives to get there. ``scan_tolerance_m``: how
+    far the estimate's mean over the scan may be and the scan still count: the robot
+    stands still through it (its spread must stay within half the arrival
+    tolerance), so what moves is the estimate under the crop, and a stop this far off
+    still sees every cell the plan covers (ENGR keeps them all up to 30 cm by the
+    planner's visibility, ``bench_planner``). ``lease_s``: the route lease navigation
     holds (renewed every quarter of it; without renewal the robot stops). A route gets
     ``route_time_s`` plus its length at ``route_min_speed`` before it is given up.
     ``rpc_timeout_s`` (wall) per call; a service silent for ``rpc_patience_s`` (wall,
@@ -52,6 +56,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     route_min_speed: Pos = 0.05
     settle_timeout_s: Pos = 900.0
     arrival_tolerance_m: Pos = 0.05
+    scan_tolerance_m: Pos = 0.10
     position_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600)] = 2.0
     rpc_timeout_s: Pos = 5.0

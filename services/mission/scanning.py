@@ -136,17 +136,17 @@ class Scans:
 
     def record(self, step: Step, st: ScannerStatus, poses: list[PoseEstimate]) -> str:
         """Record the scan as done if the pose over it was where planned: its mean
-        within the arrival tolerance, its spread within half of it, localized for at
-        least half the scan (a standing robot's estimate rides out a short RTK float
-        on zero-velocity updates; the statistics use the localized poses only)."""
+        within the scan tolerance, its spread within half the arrival tolerance (the
+        robot stood still), localized for at least half the scan (a standing robot's
+        estimate rides out a short RTK float on zero-velocity updates; the statistics
+        use the localized poses only)."""
         good = [p for p in poses if p.localized]
         if 2 * len(good) < max(len(poses), 1):
             return f"localized for only {len(good)} of {len(poses)} poses during the scan"
         stats = pose_stats(good)
         off = self.sv.off_by(step, stats["mean_x"], stats["mean_y"])
         moved = math.hypot(stats["sd_x"], stats["sd_y"])
-        tol = self.sv.cfg.arrival_tolerance_m
-        if off > tol or moved > tol / 2:
+        if off > self.sv.cfg.scan_tolerance_m or moved > self.sv.cfg.arrival_tolerance_m / 2:
             return (
                 f"pose during the scan {100 * off:.1f} cm off the plan "
                 f"(SD {100 * moved:.1f} cm): not recorded as done"
