@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from phenorover.eval.calibration_table import AGAINST_PAPER, OURS_AGAINST
 from phenorover.eval.results import Bench, Goal, seed_runs
-from tests.bench.bench_nav import PLACED, models, run_experiment
+from tests.bench.bench_nav import PLACED, REPO, models, run_experiment
 
 PROFILES = ("paper", "ours")
 EXPERIMENTS = ("border", "serpentine", "stationary")
@@ -110,13 +110,14 @@ TAIL = (
 
 
 def cruise_speed(profile: str) -> float:
-    """The follower's cruise speed (m/s) in ``profile``: the shipped default unless the
-    profile sets its own."""
-    from phenorover.eval.profiles import PROFILES as SETTINGS
-    from services.nav.follower_config import FollowerConfig
+    """The follower's cruise speed (m/s) in ``profile``, as nav-test runs it: the
+    profile over deploy/sim.toml, decoded as the nav service decodes its section."""
+    from common.config import decode_section, read_toml
+    from phenorover.eval.profiles import apply
+    from services.nav.config import NavConfig
 
-    own = SETTINGS[profile].get("nav", {}).get("follower", {}).get("max_speed")
-    return float(own if own is not None else FollowerConfig().max_speed)
+    services = apply(read_toml(REPO / "deploy" / "sim.toml"), profile)["services"]
+    return decode_section(services.get("nav", {}), NavConfig, "[services.nav]").follower.max_speed
 
 
 def main() -> int:
@@ -163,6 +164,7 @@ def main() -> int:
                         runs[profile].setdefault(exp, []).append(stats | {"seed": seed, "run": run})
                     bench.error_models = models(out)
     means: dict[tuple[str, str], float] = {}
+    speeds = {profile: cruise_speed(profile) for profile in PROFILES}
     for exp, key, name, unit, scale, paper in METRICS:
         if exp not in args.experiments:
             continue
@@ -181,11 +183,7 @@ def main() -> int:
             if profile == "ours" and key == "xte_p99_cm":
                 goal = Goal("<=", LANE_CLEARANCE_CM, TAIL)
             if key.startswith("xte_"):  # like with like: both at their cruise speed
-                note = (
-                    f"at {cruise_speed(profile):g} m/s; {note}"
-                    if note
-                    else (f"at {cruise_speed(profile):g} m/s")
-                )
+                note = "; ".join(filter(None, [f"at {speeds[profile]:g} m/s", note]))
             bench.figure(
                 f"{name} [{profile}]",
                 value,
