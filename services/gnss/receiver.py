@@ -199,7 +199,7 @@ class SimReceiver:
         self._queue: queue.Queue[bytes] = queue.Queue(maxsize=100)
         # set (deliver): each epoch's text goes straight to it, in the subscriber's
         # thread, rather than to a reader
-        self.sink: Callable[[bytes], None] | None = None
+        self._sink: Callable[[bytes], None] | None = None
         bus.subscribe(keys.SIM_ANTENNAS, self._on_truth)
 
     def epoch(self, msg: SimAntennas) -> str:
@@ -212,8 +212,8 @@ class SimReceiver:
             self._push(text)
 
     def _push(self, text: str) -> None:
-        if self.sink is not None:
-            self.sink(text.encode("ascii"))
+        if self._sink is not None:
+            self._sink(text.encode("ascii"))
             return
         # nobody reading: drop, as a serial port would overrun
         with contextlib.suppress(queue.Full):
@@ -222,7 +222,7 @@ class SimReceiver:
     def deliver(self, sink: Callable[[bytes], None]) -> bool:
         """Each epoch's text to ``sink`` as the simulator's antenna truth comes in (in
         lockstep at its step), not through a reader's queue."""
-        self.sink = sink
+        self._sink = sink
         return True
 
     def read(self, stop: threading.Event) -> bytes:
