@@ -25,8 +25,8 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     far the estimate's mean over the scan may be and the scan still count: the robot
     stands still through it (its spread must stay within half the arrival
     tolerance), so what moves is the estimate under the crop, and a stop this far off
-    still sees every cell the plan covers (ENGR keeps them all up to 30 cm by the
-    planner's visibility, ``bench_planner``). ``lease_s``: the route lease navigation
+    still sees every cell the plan covers (the planner's visibility: ``bench_planner``'s
+    position tolerance in docs/results.md). ``lease_s``: the route lease navigation
     holds (renewed every quarter of it; without renewal the robot stops). A route gets
     ``route_time_s`` plus its length at ``route_min_speed`` before it is given up.
     ``rpc_timeout_s`` (wall) per call; a service silent for ``rpc_patience_s`` (wall,
