@@ -44,7 +44,7 @@ Thunk = Callable[[], None]
 # first step that expected it: a subscription Zenoh has not routed yet never gets it
 # (it is then taken as it comes, not waited for), while one that is routed gets it
 # in well under a millisecond on loopback, and within this even beside a busy loop
-# on every core (50 ms was not: the first fixes then came a step late)
+# on every core (where tens of milliseconds are not enough)
 FIRST_GRACE_S = 2.0
 
 
