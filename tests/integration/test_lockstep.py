@@ -88,6 +88,18 @@ def what_happened(run: Path) -> tuple[list[Any], list[Any]]:
     return steps, events
 
 
+def first_difference(a: tuple[list[Any], list[Any]], b: tuple[list[Any], list[Any]]) -> str:
+    """Where two surveys part (their first differing step or event), for the failure
+    message: pytest's own shows only that two long lists differ."""
+    for what, xs, ys in (("step", a[0], b[0]), ("event", a[1], b[1])):
+        for i, (x, y) in enumerate(zip(xs, ys, strict=False)):
+            if x != y:
+                return f"{what} {i}:\n  first: {x}\n  other: {y}"
+        if len(xs) != len(ys):
+            return f"{len(xs)} {what}s against {len(ys)}"
+    return "the same"
+
+
 @contextmanager
 def busy_cores(n: int = 2) -> Iterator[None]:
     procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
@@ -113,5 +125,5 @@ def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path
     with busy_cores():
         loaded = what_happened(survey(manifest(tmp_path, 1000.0)))
     paced = what_happened(survey(manifest(tmp_path, 4.0)))
-    assert loaded == fast
-    assert paced == fast
+    assert loaded == fast, first_difference(fast, loaded)
+    assert paced == fast, first_difference(fast, paced)
