@@ -197,9 +197,15 @@ class Bus:
         """Send ``request`` and return the first reply.
 
         Raises RpcError with the service's reason on an error reply, RpcTimeout when
-        nobody answers within ``timeout`` seconds.
+        nobody answers within ``timeout`` seconds; in lockstep, within the lockstep's
+        deadline when that is longer: how long an answer takes in wall time is the
+        machine's load, which must not change what happens (a timed-out call is
+        retried and logged), and a callee that hangs is the lockstep's to name.
         """
-        at = None if self._clock is None else caller_attachment(self._clock.now_ns())
+        at = None
+        if self._clock is not None:
+            at = caller_attachment(self._clock.now_ns())
+            timeout = max(timeout, self._clock.deadline_s)
         replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
         return first_reply(replies, rpc, timeout)
 
