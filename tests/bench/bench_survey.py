@@ -156,10 +156,10 @@ def survey_manifest(
 ) -> Path:
     """``manifest`` with navigation ``profile``'s settings over its own and, with
     ``seed``, another draw of the simulator's and receivers' noise, and ``field`` (a
-    file in ``tmp``; the shipped one for ``ours`` without a seed or a field)."""
-    if profile == "ours" and seed is None and field is None:
-        return manifest
+    file in ``tmp``). The mission never resumes: a survey an interrupted benchmark left
+    unfinished in the run folder would otherwise be finished and scored as this one."""
     m = profiles.apply(read_toml(manifest), profile)
+    m["services"].setdefault("mission", {})["resume"] = False
     if seed is not None:
         m = profiles.seeded(m, seed)
     if field is not None:
