@@ -30,7 +30,7 @@ typecheck: $(STAMP)
 # survey under it, which is what it is for, not how long it takes beside other tests.
 LOCKSTEP := tests/integration/test_lockstep.py
 pytest: $(STAMP)
-	$(BIN)/pytest -q -n 2 --durations=15 --ignore=$(LOCKSTEP)
+	$(BIN)/pytest -q -n 2 --dist worksteal --durations=15 --ignore=$(LOCKSTEP)
 	$(BIN)/pytest -q --durations=1 $(LOCKSTEP)
 
 test: lint typecheck pytest
