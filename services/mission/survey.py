@@ -6,8 +6,9 @@ stops the robot, and a navigation that restarted (it no longer knows the route) 
 the route again, joined where the robot stands. A scan is taken only where the pose
 estimate is within ``arrival_tolerance_m`` of the planned location, checked before
 every attempt (a resumed one included), and recorded ``done`` only where the robot
-stood still over it within ``scan_tolerance_m``. An RPC that times out (its service restarting)
-is retried for ``rpc_patience_s``; only an error reply or that much silence fails.
+stood still over it within ``scan_tolerance_m``. An RPC that times out (its service
+restarting, or slow on a loaded machine) is retried for ``rpc_patience_s``; only an
+error reply or that much silence fails.
 """
 
 from __future__ import annotations
