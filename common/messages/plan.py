@@ -8,6 +8,8 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import msgspec
+import numpy as np
+import numpy.typing as npt
 
 from common.field import FieldLayout, ScannerModel
 from common.messages.core import Array, Coordinate, Finite, Message, NonNegative, Positive
@@ -100,7 +102,10 @@ class PlanResult(Message, frozen=True, kw_only=True):
     """Everything a survey needs, plus what it took to get it. ``plot_boxes`` is the
     (P, 6) float64 array of plot boxes; ``origin`` the tour start (x, y);
     ``cell_views`` the (C,) int64 count, per cell of the field, of the selected
-    locations that see it (what the dashboard colours the cells by)."""
+    locations that see it (what the dashboard colours the cells by).
+    ``footprints``: the plots' boxes in the field file, when ``plot_boxes`` are not
+    them (a plan on the crop as a survey measured it plans on the measured canopy;
+    its traits are still cut by the field book's plots); :meth:`plot_footprints`."""
 
     field: str
     layout: FieldLayout
@@ -116,6 +121,12 @@ class PlanResult(Message, frozen=True, kw_only=True):
     legs: list[Leg]
     timings: dict[str, NonNegative]
     cell_views: Array | None = None
+    footprints: Array | None = None
+
+    def plot_footprints(self) -> npt.NDArray[np.float64]:
+        """(P, 6) the plots as the field file has them (whatever boxes were planned on)."""
+        a = self.plot_boxes if self.footprints is None else self.footprints
+        return np.asarray(a.numpy(), dtype=np.float64).reshape(-1, 6)
 
 
 class PlanRequest(Message, frozen=True, kw_only=True):

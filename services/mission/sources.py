@@ -126,12 +126,13 @@ def unfinished(run_dir: Path, field: str, warn: Callable[[str], None]) -> Unfini
 
 def surveys_field(field: str, plan: PlanResult) -> bool:
     """Whether ``plan`` is of ``field``: the same plots, wherever the field file lies
-    and whatever it is called."""
+    and whatever it is called (a plan on the crop as measured keeps the field's
+    plots as its footprints)."""
     try:
         _, fld = load_field(field)
     except FieldError:
         return False
-    boxes = np.asarray(plan.plot_boxes.numpy(), dtype=np.float64).reshape(-1, 6)
+    boxes = plan.plot_footprints()
     return boxes.shape == fld.plot_boxes.shape and bool(
         np.allclose(boxes, fld.plot_boxes, atol=1e-6)
     )

@@ -12,12 +12,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import numpy.typing as npt
 
 from common import cropmodel
 from common.cropmodel import CropModel, CropModelError
 from common.field import Field, FieldError, FieldLayout, ScannerModel, assemble
+from common.messages.core import Array
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from services.planner.budget import PlanBudget, check
 from services.planner.core import plan
@@ -96,13 +98,15 @@ def plan_measured(
     options: PlanOptions | None = None,
     progress: Progress | None = None,
 ) -> PlanResult:
-    """Plan on the measured field, covering its target cells. Raises CropModelError or
-    ValueError (one line)."""
+    """Plan on the measured field, covering its target cells; the plan keeps the
+    field's plot boxes as its ``footprints`` (what the survey's traits are cut by).
+    Raises CropModelError or ValueError (one line)."""
     _, fld = measured_field(layout, field, model)
     targets = target_cells(field, fld, model)
     if not targets.any():
         raise CropModelError(f"the crop model of field {field.name!r} holds no canopy")
-    return plan(layout, scanner, options, field=fld, progress=progress, targets=targets)
+    result = plan(layout, scanner, options, field=fld, progress=progress, targets=targets)
+    return msgspec.structs.replace(result, footprints=Array.of(field.plot_boxes))
 
 
 def plan_from_survey(

@@ -76,8 +76,8 @@ class RunInput:
 def plan_field(plan: PlanResult, db: Path) -> Field:
     """The field the plan was made for: its layout's, else its field file's (a
     GeoJSON field's plots need not be a regular grid), whichever has the plan's plot
-    boxes. Raises RunError."""
-    boxes = np.asarray(plan.plot_boxes.numpy(), dtype=np.float64).reshape(-1, 6)
+    footprints (a plan on a measured crop planned on other boxes). Raises RunError."""
+    boxes = plan.plot_footprints()
     for make in (lambda: build_field(plan.layout), lambda: load_field(plan.field)[1]):
         try:
             f = make()

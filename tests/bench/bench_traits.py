@@ -2,9 +2,12 @@
 
 The example trial (``common/fields/trial.toml``: ENGR's 60 plots, 20 entries x 3
 reps) grown by the simulator (:mod:`services.sim.trial`) and surveyed as the
-registration benchmark does it (:func:`bench_registration.survey`: the planner's
-locations on the nominal boxes, a FARO scan at 0.36 deg from each, navigation poses
-drawn under its error model, then registration: nav + C2C with the spheres). Then the
+registration benchmark does it (:func:`bench_registration.survey`: a plan's
+locations, a FARO scan at 0.36 deg from each, navigation poses drawn under its error
+model, then registration: nav + C2C with the spheres) on two dates, as a user flies a
+season: the first on the plan on the nominal boxes, the second on the plan made from
+the first's crop (``phenorover plan --from-survey``); beside it, like for like, the
+second date flown on the nominal plan as well. Then the
 traits (:mod:`services.traits`) of the registered cloud, merged at 1 cm as
 ``registered.laz`` is, scored against the same definitions applied to the simulator's
 plants (:func:`services.sim.plant_truth.plant_truth`):
@@ -12,6 +15,9 @@ plants (:func:`services.sim.plant_truth.plant_truth`):
 - per seed (three) and two dates (70 and 91 days after planting): canopy height
   RMSE and bias, cover and voxel volume errors, growth in height between the dates,
   heritability of height measured against the same statistic on the true heights;
+  the same for the second date on the nominal plan;
+- the plan from the survey against the nominal one: the true foliage cells each
+  plan's scans see at 91 days, and their locations and tours (seed 1);
 - ``phenorover traits`` wall time on one survey (a run folder, the command as a
   user runs it) and on a season of five dates (one seed).
 
@@ -76,15 +82,22 @@ def world_config(seed: int, date: datetime.date) -> WorldConfig:
 
 
 def simulate(
-    seed: int, date: datetime.date, xy: list[Any], pr: PlanResult, runs: Path, step: float
+    seed: int,
+    date: datetime.date,
+    xy: list[Any],
+    pr: PlanResult,
+    runs: Path,
+    step: float,
+    plan: str = "",
 ) -> tuple[RunTraits, list[dict[str, Any]], float]:
-    """One survey of the trial on ``date``: its measured traits, the plants' truth and
-    the registration's time; the run folder (``mission.db``, ``registered.laz``) is
-    left in ``runs`` for the command-line timings."""
+    """One survey of the trial on ``date`` from the locations ``xy`` of the plan ``pr``:
+    its measured traits, the plants' truth and the registration's time; the run folder
+    (``mission.db``, ``registered.laz``; its name ends in ``plan``) is left in
+    ``runs`` for the command-line timings."""
     layout, field = load_field("trial")
     world = World(layout, field, world_config(seed, date))
     truth = plant_truth(layout, field, world.terrain, world.foliage, world.trial)
-    run = runs / f"trial-s{seed}-{date.isoformat()}"
+    run = runs / _run_name(seed, date, plan)
     run.mkdir(parents=True)
     rng = np.random.default_rng([seed, date.toordinal()])
     inputs, _ = survey(world, xy, run, ScanSettings(step_deg=step), rng)
@@ -151,64 +164,87 @@ def main() -> int:
     xy = [field.cand_xy[field.candidate_index(c)] for c in pr.selected]
     print(f"plan: {len(xy)} scan locations on the nominal boxes")
     by_seed: list[ev.SeedScore] = []
+    beside: list[ev.SeedScore] = []
     out: dict[str, Any] = {"seeds": args.seeds, "dates": [d.isoformat() for d in DATES]}
     with tempfile.TemporaryDirectory() as d:
         runs = Path(d) if args.keep is None else args.keep
         season_runs: list[Path] = []
         for seed in args.seeds:
             try:
-                dates = []
-                for date in DATES:
-                    rt, truth, reg_s = simulate(seed, date, xy, pr, runs, args.step)
-                    dates.append((rt, truth))
-                    print(f"seed {seed} {date}: registered in {reg_s:.1f} s")
-                # growth as the product's season step measures it (dates checked
-                # against each other on stable ground, one ground for both)
-                s = season([rt.run_dir for rt, _ in dates], TraitsConfig())
-                grew = np.nansum(s.growth, axis=0)
-                grew[np.isnan(s.growth).any(axis=0)] = np.nan
-                off = s.offsets[-1]
-                out.setdefault("offsets_mm", []).append(None if off is None else off.median_m * 1e3)
-                score = ev.score_seed(seed, dates, heritability, grew)
+                followed, nominal, mp = _season(seed, xy, pr, runs, args.step, out)
             except Exception as exc:
                 bench.fail(f"seed {seed}", f"{type(exc).__name__}: {exc}")
                 continue
-            by_seed.append(score)
-            print(ev.describe(score))
+            by_seed.append(followed)
+            beside.append(nominal)
+            print(ev.describe(followed))
+            print("the second date on the nominal plan:", ev.describe(nominal), sep="\n")
             if not season_runs:
-                season_runs = [rt.run_dir for rt, _ in dates]
-                _plan_experiment(bench, seed, dates[0][0], DATES[-1], pr, out)
+                season_runs = [runs / _run_name(seed, day) for day in DATES]
+                _plan_experiment(bench, seed, DATES[-1], pr, mp, out)
         fig.record_scores(bench, by_seed)
+        fig.record_beside(bench, beside)
         if not args.no_timings:
             _timings(bench, args, season_runs, xy, pr, runs, out)
     out["scores"] = [msgspec.to_builtins(s) for s in by_seed]
     return bench.finish(args.json, out)
 
 
+def _run_name(seed: int, date: datetime.date, plan: str = "") -> str:
+    return f"trial-s{seed}-{date.isoformat()}{plan}"
+
+
+def _season(
+    seed: int, xy: list[Any], pr: PlanResult, runs: Path, step: float, out: dict[str, Any]
+) -> tuple[ev.SeedScore, ev.SeedScore, PlanResult]:
+    """One seed's season as a user flies it: the first date on the plan on the nominal
+    boxes, the second on the plan made from the first date's crop
+    (``phenorover plan --from-survey``), scored with the growth the product's season
+    step measures; and, like for like, the same second date flown on the nominal plan.
+    Returns both scores and the plan from the survey."""
+    from phenorover.eval.plan_survey import locations
+    from services.planner.measured import plan_measured
+
+    first = simulate(seed, DATES[0], xy, pr, runs, step)
+    assert first[0].crop is not None
+    layout, field = load_field("trial")
+    mp = plan_measured(layout, field, first[0].crop)
+    then = simulate(seed, DATES[1], list(locations(mp)), mp, runs, step)
+    same = simulate(seed, DATES[1], xy, pr, runs, step, plan="-nominal")
+    out.setdefault("locations_from_survey", []).append(len(mp.selected))
+    scores = []
+    for name, second in (("plan from the survey", then), ("nominal plan", same)):
+        print(f"seed {seed}, {name}: registered in {first[2]:.1f} + {second[2]:.1f} s")
+        # growth as the product's season step measures it (dates checked against each
+        # other on stable ground, one ground for both)
+        s = season([first[0].run_dir, second[0].run_dir], TraitsConfig())
+        grew = np.nansum(s.growth, axis=0)
+        grew[np.isnan(s.growth).any(axis=0)] = np.nan
+        off = s.offsets[-1]
+        mm = None if off is None else off.median_m * 1e3
+        out.setdefault("offsets_mm", {}).setdefault(name, []).append(mm)
+        dates = [first[:2], second[:2]]
+        scores.append(ev.score_seed(seed, dates, heritability, grew))
+    return scores[0], scores[1], mp
+
+
 def _plan_experiment(
     bench: Bench,
     seed: int,
-    rt: RunTraits,
     then: datetime.date,
     pr: PlanResult,
+    mp: PlanResult,
     out: dict[str, Any],
 ) -> None:
-    """The next survey (on ``then``) planned on the crop as this one (``rt``) measured
-    it, against the plan on the nominal boxes: the true foliage cells each plan's
-    scans see (0.5 deg) in the world of the next survey, with each plan's locations
-    and tour beside them (the measured crop may need more of them)."""
+    """The plan on the crop a survey measured (``mp``) against the plan on the nominal
+    boxes (``pr``): the true foliage cells each plan's scans see (0.5 deg) in the
+    world of the next survey (on ``then``), with each plan's locations and tour
+    beside them (the measured crop may need more of them)."""
     from phenorover.eval.plan_survey import compare_plans, locations
-    from services.planner.measured import plan_measured
 
     try:
-        assert rt.crop is not None
         layout, field = load_field("trial")
-        world = World(
-            layout,
-            field,
-            world_config(seed, then),
-        )
-        mp = plan_measured(layout, field, rt.crop)
+        world = World(layout, field, world_config(seed, then))
         cmp = compare_plans(world, locations(pr), locations(mp))
     except Exception as exc:
         bench.fail("plan from the survey", f"{type(exc).__name__}: {exc}")

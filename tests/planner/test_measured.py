@@ -161,6 +161,10 @@ def test_plan_on_the_measured_crop_and_compare(tiny: tuple[FieldLayout, Field]) 
     m = _model(field, layout, [0.6, 1.5, 0.5, 1.5, 0.6, 0.0])
     nominal = plan(layout, None, OPTS, field=field)
     measured = plan_measured(layout, field, m, None, OPTS)
+    # planned on the measured boxes, keeping the field's own as its footprints
+    assert not np.allclose(measured.plot_boxes.numpy().reshape(-1, 6), field.plot_boxes)
+    assert np.array_equal(measured.plot_footprints(), field.plot_boxes)
+    assert np.array_equal(nominal.plot_footprints(), field.plot_boxes)
     assert measured.cover.cells_total < nominal.cover.cells_total
     assert measured.cover.cells_covered == measured.cover.cells_coverable
     assert measured.cell_views is not None

@@ -147,3 +147,25 @@ def test_plot_boxes_neither_layout_nor_field_file_are_refused(
     run = write_run(tmp_path / "run", bad, np.array([[1.0, 1.0, 0.0]]))
     with pytest.raises(RunError, match="plot boxes"):
         load_run(run)
+
+
+def test_a_plan_on_the_measured_crop_is_cut_by_the_field_books_plots(
+    tiny_plan: PlanResult, tmp_path: Path
+) -> None:
+    # `phenorover plan --from-survey` plans on the measured canopy, which leans past
+    # the footprints; the survey flown on it is still measured plot by plot
+    layout, field = load_field(TINY)
+    pr = plan_for(tiny_plan, layout)
+    canopy = field.plot_boxes.copy()
+    canopy[:, [1, 4]] += [-0.2, 0.2]
+    measured = msgspec.structs.replace(
+        pr, plot_boxes=Array.of(canopy), footprints=Array.of(field.plot_boxes)
+    )
+    back = msgspec.json.decode(msgspec.json.encode(measured), type=PlanResult)
+    assert np.array_equal(back.plot_footprints(), field.plot_boxes)
+    run = write_run(tmp_path / "run", measured, np.array([[1.0, 1.0, 0.0]]))
+    assert np.array_equal(load_run(run).field.plot_boxes, field.plot_boxes)
+    # without the footprints the same boxes are refused, as any other
+    run2 = write_run(tmp_path / "run2", msgspec.structs.replace(measured, footprints=None), None)
+    with pytest.raises(RunError, match="plot boxes"):
+        load_run(run2)
