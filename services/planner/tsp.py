@@ -150,6 +150,7 @@ def circuit_cpsat(
     solver.parameters.max_time_in_seconds = float(time_limit_s)
     solver.parameters.num_workers = 8  # full portfolio; see cover.py
     solver.parameters.random_seed = seed
+    solver.parameters.interleave_search = True  # the same tour on every run; see cover.py
     code = solver.solve(m)
     if code not in (cp_model.OPTIMAL, cp_model.FEASIBLE):
         raise RuntimeError(f"CP-SAT found no tour of {n} nodes in {time_limit_s} s")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -67,3 +69,16 @@ def test_paper_fields(name: str, expected: int):
     if name == "engr":
         rows = sorted(field.cand_row_lane[exact.selected].tolist())
         assert rows == list(range(11))
+
+
+def test_exact_cover_is_the_same_on_every_run():
+    # a ring of cells, each seen by three neighbouring candidates: thousands of covers
+    # of the fewest locations, of which the solver must always return the same one
+    n = 60
+    rows = np.concatenate([np.arange(n), np.arange(n), np.arange(n)])
+    cols = np.concatenate([np.arange(n), (np.arange(n) + 1) % n, (np.arange(n) + 2) % n])
+    vis = sp.csr_matrix((np.ones(3 * n, dtype=bool), (rows, cols)), shape=(n, n))
+    worse = dataclasses.replace(greedy_cover(vis), selected=list(range(0, n, 2)))
+    runs = {tuple(exact_cover(vis, time_limit_s=30, hint=worse).selected) for _ in range(5)}
+    assert len(runs) == 1
+    assert len(next(iter(runs))) == n // 3
