@@ -132,7 +132,10 @@ def surveys_field(field: str, plan: PlanResult) -> bool:
         _, fld = load_field(field)
     except FieldError:
         return False
-    boxes = plan.plot_footprints()
+    try:
+        boxes = plan.plot_footprints()
+    except ValueError:  # a plan whose boxes are not (P, 6) floats is of no field
+        return False
     return boxes.shape == fld.plot_boxes.shape and bool(
         np.allclose(boxes, fld.plot_boxes, atol=1e-6)
     )

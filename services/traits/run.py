@@ -77,7 +77,10 @@ def plan_field(plan: PlanResult, db: Path) -> Field:
     """The field the plan was made for: its layout's, else its field file's (a
     GeoJSON field's plots need not be a regular grid), whichever has the plan's plot
     footprints (a plan on a measured crop planned on other boxes). Raises RunError."""
-    boxes = plan.plot_footprints()
+    try:
+        boxes = plan.plot_footprints()
+    except ValueError as exc:
+        raise RunError(f"{db}: the plan's plot boxes: {exc}") from None
     for make in (lambda: build_field(plan.layout), lambda: load_field(plan.field)[1]):
         try:
             f = make()

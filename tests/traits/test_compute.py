@@ -169,3 +169,8 @@ def test_a_plan_on_the_measured_crop_is_cut_by_the_field_books_plots(
     run2 = write_run(tmp_path / "run2", msgspec.structs.replace(measured, footprints=None), None)
     with pytest.raises(RunError, match="plot boxes"):
         load_run(run2)
+    # footprints that are not boxes: one line, not a traceback
+    bad = Array(dtype="<f8", shape=(7,), data=np.zeros(7).tobytes())
+    run3 = write_run(tmp_path / "run3", msgspec.structs.replace(measured, footprints=bad), None)
+    with pytest.raises(RunError, match="plot boxes"):
+        load_run(run3)
