@@ -104,6 +104,27 @@ def read_e57(path: str | Path) -> list[PosedScan]:
     return out
 
 
+def read_e57_positions(path: str | Path) -> F64:
+    """The (S, 3) positions of the scanner at every scan of an E57 file (its poses'
+    translations; NaN for a scan without a pose), without reading the points. Raises
+    CloudIOError when the file cannot be read."""
+    import pye57
+
+    try:
+        e57 = pye57.E57(str(path), mode="r")
+    except Exception as exc:  # libE57 raises its own exception types
+        raise CloudIOError(f"{path}: cannot read E57: {exc}") from None
+    try:
+        out = np.full((e57.scan_count, 3), np.nan)
+        for i in range(e57.scan_count):
+            header = e57.get_header(i)
+            if header.has_pose():
+                out[i] = header.translation
+    finally:
+        e57.close()
+    return out
+
+
 Merged = tuple[F64, F32, npt.NDArray[np.int64]]
 
 

@@ -26,6 +26,7 @@ from common.cropmodel import CropModel, assign_plots, crop_model
 from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
+from services.traits.hidden import hidden_voxels
 from services.traits.run import Record, RunError, RunInput, load_run
 from services.traits.season import Offset
 
@@ -101,9 +102,13 @@ def trait_table(
     return TraitTable(records, values, quality, date, cfg.definition)
 
 
-def field_ground(inp: RunInput, cfg: TraitsConfig) -> tuple[F64, GroundModel, float]:
+Found = tuple[F64, GroundModel, float, npt.NDArray[np.bool_]]
+
+
+def field_ground(inp: RunInput, cfg: TraitsConfig) -> Found:
     """The run's points over its field (and ``crop_margin`` around it), the ground
-    found in them and the seconds it took; raises RunError when no ground is found."""
+    found in them, the seconds it took and which of the run's points they are;
+    raises RunError when no ground is found."""
     b = inp.field.bounds
     m = cfg.ground.crop_margin
     xyz = inp.cloud
@@ -124,13 +129,13 @@ def field_ground(inp: RunInput, cfg: TraitsConfig) -> tuple[F64, GroundModel, fl
         "ground: %d of %d points in the field, %d x %d cells of %.2f m (%.1f s)",
         len(xyz), len(inp.cloud), *ground.shape[::-1], ground.cell, took,
     )  # fmt: skip
-    return xyz, ground, took
+    return xyz, ground, took, keep
 
 
 def compute_traits(
     inp: RunInput,
     cfg: TraitsConfig,
-    found: tuple[F64, GroundModel, float] | None = None,
+    found: Found | None = None,
     heights_from: GroundModel | None = None,
     offset: Offset | None = None,
 ) -> RunTraits:
@@ -139,7 +144,7 @@ def compute_traits(
     computed. ``heights_from``: the ground heights are measured from (default: the
     run's own), raised by ``offset`` (a season's reference date's ground, moved onto
     this date by the offset between them, :meth:`.season.Offset.at`)."""
-    xyz, ground, took = found if found is not None else field_ground(inp, cfg)
+    xyz, ground, took, keep = found if found is not None else field_ground(inp, cfg)
     timings: dict[str, float] = {"ground": took}
     t = time.perf_counter()
     base = heights_from or ground
@@ -147,6 +152,16 @@ def compute_traits(
     if offset is not None:
         h -= offset.at(xyz[:, 0], xyz[:, 1])
     table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
+    views = inp.scan_views()
+    if views is not None:
+        # the walk's layers stand on the ground the heights do (an offset of
+        # millimetres moves none of them)
+        hidden = hidden_voxels(xyz, h, views, keep, inp.field, base, cfg.definition)
+        vol = table.values[:, NAMES.index("volume_voxel")]
+        vol += np.where(np.isfinite(vol), hidden * cfg.definition.voxel**3, 0.0)
+        timings["hidden"] = time.perf_counter() - t
+        log.info("hidden voxels: %d in %d plots (%.1f s)", hidden.sum(), (hidden > 0).sum(),
+                 timings["hidden"])  # fmt: skip
     crop = crop_model(
         xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date
     )

@@ -35,6 +35,7 @@ F64 = npt.NDArray[np.float64]
 log = logging.getLogger("phenorover.traits")
 
 CLOUD = "registered.laz"
+SCANS = "registered.e57"  # the same scans with their poses: where each was seen from
 MANIFEST_COPY = "manifest.toml"  # services/mission/runfiles.py keeps it there
 # 2000-01-01T00:00:00Z: a mission stamp below is a simulated clock's, not a date
 WALL_CLOCK_FROM_NS = 946_684_800 * 10**9
@@ -71,6 +72,27 @@ class RunInput:
     date: str
     date_source: str
     cloud: F64
+    # each point's scan (N,): where it was seen from is read from registered.e57
+    # when the traits are computed (:func:`read_views`), after the run is checked
+    source: npt.NDArray[np.int64] | None = None
+    # or given: each point's scan and each scanner position; None when the run does
+    # not tell (no registered.e57), and the voxel volume counts only what was hit
+    views: Views | None = None
+
+    def scan_views(self) -> Views | None:
+        """Where each point was seen from (see :func:`read_views`)."""
+        if self.views is None and self.source is not None:
+            return read_views(self.run_dir, self.source)
+        return self.views
+
+
+@dataclasses.dataclass(frozen=True)
+class Views:
+    """Each point's scan ``source`` (N,) and each scan's scanner position
+    ``origins`` (S, 3)."""
+
+    source: npt.NDArray[np.int64]
+    origins: F64
 
 
 def plan_field(plan: PlanResult, db: Path) -> Field:
@@ -127,8 +149,33 @@ def survey_date(run_dir: Path, created_ns: int, given: str | None) -> tuple[str,
     return "", ""
 
 
-def read_cloud(path: Path) -> F64:
-    """The (N, 3) field-frame points of a LAZ/LAS file; raises RunError."""
+def read_views(run: Path, source: npt.NDArray[np.int64]) -> Views | None:
+    """Where each point was seen from: ``source`` (the cloud's point source ids, its
+    scan indices) and the scanner positions of ``registered.e57``'s poses; None (and
+    a line in the log) when the file is missing or does not match the cloud."""
+    from common.pointcloud import CloudIOError, read_e57_positions
+
+    path = run / SCANS
+    try:
+        origins = read_e57_positions(path) if path.is_file() else None
+    except CloudIOError as exc:
+        log.info("voxel volume without occlusion: %s", exc)
+        return None
+    if origins is None:
+        log.info("voxel volume without occlusion: no %s beside the cloud", path)
+        return None
+    if len(origins) == 0 or source.max() >= len(origins) or not np.isfinite(origins).all():
+        log.info(
+            "voxel volume without occlusion: %s: %d scan poses for scans 0-%d",
+            path, np.isfinite(origins).all(axis=1).sum(), source.max(),
+        )  # fmt: skip
+        return None
+    return Views(source, origins)
+
+
+def read_cloud(path: Path) -> tuple[F64, npt.NDArray[np.int64]]:
+    """The (N, 3) field-frame points of a LAZ/LAS file and their point source ids
+    (N,); raises RunError."""
     import laspy
 
     if not path.is_file():
@@ -138,13 +185,14 @@ def read_cloud(path: Path) -> F64:
     try:
         las = laspy.read(str(path))
         xyz = np.column_stack([las.x, las.y, las.z]).astype(np.float64)
+        source = np.asarray(las.point_source_id, dtype=np.int64)
     except (laspy.LaspyException, OSError, ValueError, EOFError) as exc:
         raise RunError(f"{path}: not a readable LAZ file: {' '.join(str(exc).split())}") from None
     if len(xyz) == 0:
         raise RunError(f"{path}: the cloud holds no points")
     if not np.isfinite(xyz).all():
         raise RunError(f"{path}: the cloud holds non-finite coordinates")
-    return xyz
+    return xyz, source
 
 
 def load_run(run_dir: str | Path, date: str | None = None) -> RunInput:
@@ -164,5 +212,5 @@ def load_run(run_dir: str | Path, date: str | None = None) -> RunInput:
     field = plan_field(plan, db)
     when, source = survey_date(run, int(mission.get("created_ns") or 0), date)
     book = field_records(plan.layout, field, db)
-    cloud = read_cloud(run / CLOUD)
-    return RunInput(run, mission, plan.layout, field, book, when, source, cloud)
+    cloud, ids = read_cloud(run / CLOUD)
+    return RunInput(run, mission, plan.layout, field, book, when, source, cloud, ids)

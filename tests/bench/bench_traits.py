@@ -46,7 +46,7 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2]
 from common import fieldbook
 from common.field import load_field
 from common.messages.plan import PlanResult
-from common.pointcloud import voxel_merge, write_laz
+from common.pointcloud import voxel_merge, write_e57, write_merged_laz
 from phenorover.eval import traits as ev
 from phenorover.eval import traits_bench as fig
 from phenorover.eval.registration import NAV_SIGMA
@@ -61,7 +61,7 @@ from services.sim.trial import TrialConfig
 from services.sim.world import World, WorldConfig
 from services.traits.compute import RunTraits, compute_traits
 from services.traits.config import TraitsConfig
-from services.traits.run import RunInput
+from services.traits.run import RunInput, read_views
 from services.traits.series import season
 from services.traits.stats import heritability
 from tests.bench.bench_registration import config as register_config
@@ -104,7 +104,12 @@ def simulate(
     t = time.perf_counter()
     reg = register(inputs, register_config())
     reg_s = time.perf_counter() - t
-    write_laz(run / "registered.laz", reg.scans, 0.01)
+    merged = voxel_merge(reg.scans, 0.01)
+    pts, src = merged[0], merged[2]
+    write_merged_laz(run / "registered.laz", merged)
+    # the scans with their poses, as `phenorover register` leaves them: where each
+    # point was seen from, for the voxel volume's hidden voxels
+    write_e57(run / "registered.e57", reg.scans)
     # as a simulated mission's folder holds it: the simulator's clock has no calendar,
     # so the traits take the survey's date from the manifest's trial
     (run / "manifest.toml").write_text(
@@ -114,7 +119,6 @@ def simulate(
     log.create(run.name, pr.field, 0, msgspec.json.encode(pr).decode(), [])
     log.set_state("done")
     log.close()
-    pts, _, _ = voxel_merge(reg.scans, 0.01)
     inp = RunInput(
         run_dir=run,
         mission={"id": run.name},
@@ -124,6 +128,7 @@ def simulate(
         date=date.isoformat(),
         date_source="the benchmark",
         cloud=pts,
+        views=read_views(run, src),
     )
     return compute_traits(inp, TraitsConfig()), truth, reg_s
 

@@ -1,0 +1,149 @@
+"""Voxels hidden behind foliage: what the voxel volume adds for what no ray reached.
+
+A scanner in the lanes sees a canopy's surface; its inside, and its far side from
+where no scan stood, stay dark. Counting only the voxels that hold a return measures
+the surface, about half of a row crop's occupied voxels. So every voxel of the
+definition's lattice (:func:`common.canopy.plot_traits`: ``voxel`` cubes from the
+plot's corner, layers by height above the ground) is one of three, as in occupancy
+mapping (OctoMap's occupied, free and unknown):
+
+- *hit*: it holds a canopy return;
+- *passed*: a ray crossed it on its way to a return beyond, so it is (mostly) empty;
+  a gap where plants failed to emerge, seen through, stays empty;
+- *hidden*: neither. A hidden voxel inside the convex hull of the plot's canopy is
+  counted as occupied: what kept every ray out of it is foliage in front, and a
+  canopy dense enough for that is dense behind it too. Hidden voxels outside the
+  hull are air no scan looked at, and are not counted. A voxel is inside when its
+  centre is within half a voxel of the hull (the voxel reaches into it: a canopy's
+  edge seen from no scan, such as a plot's end, still fills the voxels it cuts).
+
+The rays are walked from each scan's scanner position to each point of it in steps
+of half a voxel (:func:`_walk`), compiled, on every core.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+import numpy.typing as npt
+
+from common.canopy import CanopyDefinition, footprint_cells
+from common.field import Field
+from services.traits.ground import GroundModel
+from services.traits.run import Views
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+B = npt.NDArray[np.bool_]
+
+MAX_LAYERS = 100  # layers of voxels above the ground a canopy may fill (10 m at 10 cm)
+
+
+def hidden_voxels(
+    xyz: F64, h: F64, views: Views, keep: B, field: Field, ground: GroundModel,
+    d: CanopyDefinition,
+) -> I64:  # fmt: skip
+    """Per plot, the hidden voxels inside its canopy's hull (see the module
+    docstring): ``xyz`` (N, 3) the points (``keep`` of the run's cloud, whose
+    ``views`` say where each was seen from), ``h`` their heights above the ground."""
+    boxes = field.plot_boxes[:, [0, 1, 3, 4]]
+    dims = np.array([footprint_cells(b, d.voxel) for b in boxes], dtype=np.int64)
+    canopy = h >= d.min_height
+    layers = int(min(MAX_LAYERS, math.ceil(float(h[canopy].max(initial=0.0)) / d.voxel) + 1))
+    per_plot = dims[:, 0] * dims[:, 1] * layers
+    offset = np.concatenate([[0], np.cumsum(per_plot)]).astype(np.int64)
+    passed = np.zeros(int(offset[-1]), dtype=np.bool_)
+    row_lo, col_lo, table = _bands(field)
+    _walk(
+        np.ascontiguousarray(xyz), views.origins[views.source[keep]], ground.z, ground.x0,
+        ground.y0, ground.cell, row_lo, col_lo, table, np.ascontiguousarray(boxes),
+        dims, offset, layers, d.voxel, passed,
+    )  # fmt: skip
+    from common.cropmodel import assign_plots
+
+    plot = assign_plots(xyz[canopy, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
+    pts, ph = xyz[canopy][plot >= 0], h[canopy][plot >= 0]
+    plot = plot[plot >= 0]
+    out = np.zeros(len(boxes), dtype=np.int64)
+    for k in np.unique(plot):
+        mine = plot == k
+        grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
+        out[k] = _hidden_in_hull(pts[mine, :2], ph[mine], boxes[k], grid, d.voxel)
+    return out
+
+
+def _bands(field: Field) -> tuple[F64, F64, F64]:
+    """The lookup :func:`_walk` finds a sample's plot by (as
+    :func:`common.cropmodel.assign_plots`): each row band's lower y, each column
+    band's lower x and the plot in each (row, column) band (-1 none; float, as numba
+    takes one array type less)."""
+    b, row, col = field.plot_boxes, field.plot_row, field.plot_col
+    nrows, ncols = int(row.max()) + 1, int(col.max()) + 1
+    table = np.full((nrows, ncols), -1.0)
+    table[row, col] = np.arange(len(b))
+    row_lo = np.array([b[row == r, 1].min() for r in range(nrows)])
+    col_lo = np.array([b[col == c, 0].min() for c in range(ncols)])
+    return row_lo, col_lo, table
+
+
+def _hidden_in_hull(xy: F64, h: F64, box: F64, passed: B, v: float) -> int:
+    """Voxels of one plot's lattice (``passed``: (nx, ny, nz)) reaching into the hull
+    of its canopy points ``xy``, ``h`` (centre within half a voxel of it), neither
+    hit nor passed."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(h) < 4:
+        return 0
+    try:
+        hull = ConvexHull(np.column_stack([xy, h]))
+    except QhullError:  # flat or too few: no inside to hide anything
+        return 0
+    nx, ny, nz = passed.shape
+    hit = np.zeros_like(passed)
+    ix = np.clip(np.floor((xy[:, 0] - box[0]) / v).astype(np.int64), 0, nx - 1)
+    iy = np.clip(np.floor((xy[:, 1] - box[1]) / v).astype(np.int64), 0, ny - 1)
+    iz = np.clip(np.floor(h / v).astype(np.int64), 0, nz - 1)
+    hit[ix, iy, iz] = True
+    dark = np.argwhere(~hit & ~passed)
+    if len(dark) == 0:
+        return 0
+    centre = (dark + 0.5) * v + np.array([box[0], box[1], 0.0])
+    inside = np.all(centre @ hull.equations[:, :3].T + hull.equations[:, 3] <= 0.5 * v, axis=1)
+    return int(inside.sum())
+
+
+@nb.njit(parallel=True, cache=True, error_model="numpy")
+def _walk(
+    pts: F64, origins: F64, gz: F64, gx0: float, gy0: float, gcell: float,
+    row_lo: F64, col_lo: F64, table: F64, boxes: F64, dims: I64, offset: I64,
+    layers: int, v: float, passed: B,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """Mark in ``passed`` every voxel of a plot's lattice that a ray from
+    ``origins[i]`` to ``pts[i]`` crosses, up to half a voxel before the point.
+    Threads may mark one voxel at once; they all write True."""
+    gny, gnx = gz.shape
+    nrows, ncols = table.shape
+    step = 0.5 * v
+    for i in nb.prange(len(pts)):
+        o = origins[i]
+        dx, dy, dz = pts[i, 0] - o[0], pts[i, 1] - o[1], pts[i, 2] - o[2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        for s in range(1, int(length / step)):
+            t = s * step / length
+            x, y, z = o[0] + t * dx, o[1] + t * dy, o[2] + t * dz
+            r = np.searchsorted(row_lo, y, side="right") - 1
+            c = np.searchsorted(col_lo, x, side="right") - 1
+            if r < 0 or c < 0 or r >= nrows or c >= ncols or table[r, c] < 0:
+                continue
+            p = int(table[r, c])
+            ix = math.floor((x - boxes[p, 0]) / v)
+            iy = math.floor((y - boxes[p, 1]) / v)
+            if ix < 0 or iy < 0 or ix >= dims[p, 0] or iy >= dims[p, 1]:
+                continue  # in the band, not in the plot (a lane between plots)
+            gj = min(max(int((x - gx0) / gcell), 0), gnx - 1)
+            gi = min(max(int((y - gy0) / gcell), 0), gny - 1)
+            iz = math.floor((z - gz[gi, gj]) / v)
+            if 0 <= iz < layers:
+                passed[offset[p] + (ix * dims[p, 1] + iy) * layers + iz] = True

@@ -1,0 +1,97 @@
+"""Voxels hidden behind foliage: a solid canopy seen from one lane is counted whole,
+a gap seen through stays empty."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from common.canopy import CanopyDefinition, plot_traits
+from common.field import load_field
+from services.traits.ground import GroundModel
+from services.traits.hidden import hidden_voxels
+from services.traits.run import Views
+from tests.traits.conftest import TINY
+
+F64 = npt.NDArray[np.float64]
+D = CanopyDefinition()  # 10 cm voxels
+
+
+def _scan(origin: F64, blocks: list[F64], step_deg: float = 0.25) -> F64:
+    """First hits of rays from ``origin`` on solid ``blocks`` [x0, y0, z0, x1, y1, z1]
+    and the ground z = 0: what a scanner there would return."""
+    az, el = np.meshgrid(
+        np.radians(np.arange(0.0, 360.0, step_deg)), np.radians(np.arange(-60.0, 30.0, step_deg))
+    )
+    az, el = az.ravel(), el.ravel()
+    d = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d[:, 2] < 0, -origin[2] / d[:, 2], np.inf)
+        for b in blocks:
+            t1, t2 = (b[:3] - origin) / d, (b[3:] - origin) / d
+            near = np.nanmax(np.minimum(t1, t2), axis=1)
+            far = np.nanmin(np.maximum(t1, t2), axis=1)
+            t = np.where((near <= far) & (near > 0) & (near < t), near, t)
+    keep = np.isfinite(t) & (t < 20.0)
+    return origin + t[keep, None] * d[keep]
+
+
+def _volume(blocks: list[F64], origins: F64) -> tuple[float, float]:
+    """Plot 0's voxel volume from a scan at each of ``origins``: (hits only, with
+    hidden)."""
+    _, field = load_field(TINY)
+    scans = [_scan(o, blocks) for o in origins]
+    xyz = np.vstack(scans)
+    source = np.concatenate([np.full(len(p), k) for k, p in enumerate(scans)]).astype(np.int64)
+    ground = GroundModel(
+        0.0, 0.0, 0.25, np.zeros((23, 67)), np.ones((23, 67), bool), np.ones((23, 67), np.int64)
+    )
+    h = xyz[:, 2].copy()
+    hidden = hidden_voxels(
+        xyz, h, Views(source, origins), np.ones(len(xyz), bool), field, ground, D
+    )
+    box = field.plot_boxes[0, [0, 1, 3, 4]]
+    inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
+    inside &= xyz[:, 1] < box[3]
+    seen = plot_traits(xyz[inside, :2], h[inside], box, D)["volume_voxel"]
+    assert hidden[1:].sum() == 0  # nothing in the other plots
+    return seen, seen + hidden[0] * D.voxel**3
+
+
+# the scanner 1 m high in the lanes on either side of plot 0 (x 2.25-5.25, y 1.4-2.4)
+LANES = np.array([[3.75, 0.7, 1.0], [3.75, 2.8, 1.0]])
+
+
+def _truth(blocks: list[F64]) -> float:
+    """The definition's voxel volume of plot 0 with every bit of the blocks known (as
+    the simulator's truth takes it from its plants): a 2 cm fill of each."""
+    _, field = load_field(TINY)
+    parts = []
+    for b in blocks:
+        axes = [np.arange(b[i] + 0.01, b[i + 3], 0.02) for i in range(3)]
+        parts.append(np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3))
+    p = np.vstack(parts)
+    box = field.plot_boxes[0, [0, 1, 3, 4]]
+    return plot_traits(p[:, :2], p[:, 2], box, D)["volume_voxel"]
+
+
+def test_a_solid_canopy_seen_from_both_lanes_is_counted_whole() -> None:
+    # a canopy 0.54 m wide and 0.77 m tall in plot 0, its faces off the voxels' edges
+    block = [np.array([2.32, 1.63, 0.0, 4.83, 2.17, 0.77])]
+    truth = _truth(block)
+    seen, whole = _volume(block, LANES)
+    assert seen < 0.6 * truth  # the surface alone
+    assert abs(whole - truth) < 0.05 * truth
+
+
+def test_a_gap_seen_through_stays_empty() -> None:
+    # two canopies with a 0.8 m gap between them along the row: the hull spans the
+    # gap, the rays through it show it empty
+    blocks = [
+        np.array([2.32, 1.63, 0.0, 3.43, 2.17, 0.77]),
+        np.array([4.23, 1.63, 0.0, 5.13, 2.17, 0.77]),
+    ]
+    truth = _truth(blocks)
+    _, whole = _volume(blocks, LANES)
+    # the gap filled would add about a third
+    assert abs(whole - truth) < 0.05 * truth
