@@ -16,7 +16,9 @@ into square ``cell`` cells for the canopy height model.
   plan view over the footprint's area (0-1; PlantCV's convex-hull area, on the
   ground plane);
 - ``volume_voxel``: occupied ``voxel``-metre cubes of canopy (heights counted from
-  the ground, so voxels follow the terrain) times the cube's volume;
+  the ground, so voxels follow the terrain) times the cube's volume; a survey's
+  traits add the cubes hidden behind foliage inside the canopy's hull, which no ray
+  reached (``services/traits/hidden.py``; the simulator's truth knows every cube);
 - ``volume_hull``: the convex hull of the canopy points (x, y, h);
 - ``points``: points in the footprint; ``seen``: the share of the slices holding a
   point (canopy or ground) in the outer third of the footprint on *both* sides of the
@@ -25,8 +27,8 @@ into square ``cell`` cells for the canopy height model.
 A ground scanner in the lanes sees a row crop from its sides, often at a grazing
 angle, rarely from above (the FARO stands 1 m high beside canopies up to 1.9 m): the
 hulls need only the canopy's outermost points, so they measure the plant; voxel
-occupancy counts the surfaces the scanner saw and falls short where a plot was seen
-from one lane or from afar (docs/traits.md). Hulls are taken of points as given:
+occupancy of the returns alone counts the surfaces the scanner saw, hence the hidden
+cubes above (docs/traits.md). Hulls are taken of points as given:
 the simulator's truth gives each foliage voxel's faces, the scanner the surfaces it
 hit.
 """
@@ -84,7 +86,9 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
             "height_p50": f"p50 of the canopy height model ({c:g} cm cells)",
             "height_max": f"max of the canopy height model ({c:g} cm cells)",
             "cover": "convex hull of the canopy in plan view, over the plot area",
-            "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following",
+            "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following "
+            "(a survey: those holding a return, and those inside the canopy's hull that "
+            "no ray reached)",
             "volume_hull": "convex hull of the canopy points",
             "points": "points inside the plot footprint",
             "seen": f"{c:g} cm slices with points on both sides of the row",

@@ -2,7 +2,7 @@
 
 A scanner in the lanes sees a canopy's surface; its inside, and its far side from
 where no scan stood, stay dark. Counting only the voxels that hold a return measures
-the surface, about half of a row crop's occupied voxels. So every voxel of the
+the surface, a fraction of a row crop's occupied voxels. So every voxel of the
 definition's lattice (:func:`common.canopy.plot_traits`: ``voxel`` cubes from the
 plot's corner, layers by height above the ground) is one of three, as in occupancy
 mapping (OctoMap's occupied, free and unknown):
@@ -57,20 +57,23 @@ def hidden_voxels(
     passed = np.zeros(int(offset[-1]), dtype=np.bool_)
     row_lo, col_lo, table = _bands(field)
     _walk(
-        np.ascontiguousarray(xyz), views.origins[views.source[keep]], ground.z, ground.x0,
-        ground.y0, ground.cell, row_lo, col_lo, table, np.ascontiguousarray(boxes),
-        dims, offset, layers, d.voxel, passed,
+        np.ascontiguousarray(xyz), np.ascontiguousarray(views.source[keep]),
+        np.ascontiguousarray(views.origins), ground.z, ground.x0, ground.y0, ground.cell,
+        row_lo, col_lo, table, np.ascontiguousarray(boxes), dims, offset, layers, d.voxel,
+        passed,
     )  # fmt: skip
     from common.cropmodel import assign_plots
 
     plot = assign_plots(xyz[canopy, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
-    pts, ph = xyz[canopy][plot >= 0], h[canopy][plot >= 0]
-    plot = plot[plot >= 0]
+    order = np.flatnonzero(plot >= 0)
+    order = order[np.argsort(plot[order], kind="stable")]
+    pts, ph = xyz[canopy][order, :2], h[canopy][order]
+    ends = np.cumsum(np.bincount(plot[order], minlength=len(boxes)))
     out = np.zeros(len(boxes), dtype=np.int64)
-    for k in np.unique(plot):
-        mine = plot == k
+    for k in range(len(boxes)):
+        mine = slice(ends[k - 1] if k else 0, ends[k])
         grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
-        out[k] = _hidden_in_hull(pts[mine, :2], ph[mine], boxes[k], grid, d.voxel)
+        out[k] = _hidden_in_hull(pts[mine], ph[mine], boxes[k], grid, d.voxel)
     return out
 
 
@@ -116,18 +119,18 @@ def _hidden_in_hull(xy: F64, h: F64, box: F64, passed: B, v: float) -> int:
 
 @nb.njit(parallel=True, cache=True, error_model="numpy")
 def _walk(
-    pts: F64, origins: F64, gz: F64, gx0: float, gy0: float, gcell: float,
+    pts: F64, source: I64, origins: F64, gz: F64, gx0: float, gy0: float, gcell: float,
     row_lo: F64, col_lo: F64, table: F64, boxes: F64, dims: I64, offset: I64,
     layers: int, v: float, passed: B,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """Mark in ``passed`` every voxel of a plot's lattice that a ray from
-    ``origins[i]`` to ``pts[i]`` crosses, up to half a voxel before the point.
+    ``origins[source[i]]`` to ``pts[i]`` crosses, up to half a voxel before the point.
     Threads may mark one voxel at once; they all write True."""
     gny, gnx = gz.shape
     nrows, ncols = table.shape
     step = 0.5 * v
     for i in nb.prange(len(pts)):
-        o = origins[i]
+        o = origins[source[i]]
         dx, dy, dz = pts[i, 0] - o[0], pts[i, 1] - o[1], pts[i, 2] - o[2]
         length = math.sqrt(dx * dx + dy * dy + dz * dz)
         for s in range(1, int(length / step)):

@@ -1,7 +1,9 @@
 """A registered survey as the traits job reads it: ``RUN_DIR/mission.db`` (read-only,
 through :func:`common.missionlog.read_run`), the field its plan was made for, the
 field book, ``RUN_DIR/registered.laz`` (``phenorover register``'s merged cloud, field
-frame) and the survey's date.
+frame, each point's scan its point source id), the scanner position of each scan
+(the poses in ``RUN_DIR/registered.e57``; read when the traits are computed) and the
+survey's date.
 
 The date, first that applies: ``--date``; the mission's ``created_ns`` as a UTC date
 when it is a wall-clock stamp (from year 2000 on); for a simulated run, whose clock
