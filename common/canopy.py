@@ -103,11 +103,15 @@ def footprint_cells(box: F64, cell: float) -> tuple[int, int]:
     )
 
 
-def plot_traits(xy: F64, h: F64, box: F64, d: CanopyDefinition) -> dict[str, float]:
+def plot_traits(
+    xy: F64, h: F64, box: F64, d: CanopyDefinition, hidden: int = 0
+) -> dict[str, float]:
     """The traits of one plot from points ``xy`` (N, 2) at heights ``h`` (N,) above the
-    ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]. Heights and
-    volumes are NaN when the plot holds no canopy point, and cover too when it holds
-    no point at all."""
+    ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]; ``hidden``: the
+    voxels a survey infers occupied behind foliage, beside those holding a point
+    (``services/traits/hidden.py``; none when every bit of the plants is known).
+    Heights and volumes are NaN when the plot holds no canopy point, and cover too
+    when it holds no point at all."""
     nx, ny = footprint_cells(box, d.cell)
     ix = np.clip(((xy[:, 0] - box[0]) / d.cell).astype(np.int64), 0, nx - 1)
     iy = np.clip(((xy[:, 1] - box[1]) / d.cell).astype(np.int64), 0, ny - 1)
@@ -138,7 +142,7 @@ def plot_traits(xy: F64, h: F64, box: F64, d: CanopyDefinition) -> dict[str, flo
     vy = np.floor((xy[canopy, 1] - box[1]) / d.voxel).astype(np.int64)
     span = 1 << 20  # voxels per axis (105 km at 10 cm); offsets keep keys non-negative
     keys = ((vx + span // 2) * span + (vy + span // 2)) * span + vz
-    out["volume_voxel"] = float(np.unique(keys).size * d.voxel**3)
+    out["volume_voxel"] = float((np.unique(keys).size + hidden) * d.voxel**3)
     out["volume_hull"] = _hull_volume(np.column_stack([xy[canopy], h[canopy]]), 3)
     return out
 

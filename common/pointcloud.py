@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -78,15 +79,20 @@ def write_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
         e57.close()
 
 
-def read_e57(path: str | Path) -> list[PosedScan]:
-    """Every scan of an E57 file with its pose (identity when it has none). Raises
-    CloudIOError when the file cannot be read."""
+def _open_e57(path: str | Path) -> Any:
+    """``path`` opened for reading (a ``pye57.E57``); raises CloudIOError."""
     import pye57
 
     try:
-        e57 = pye57.E57(str(path), mode="r")
+        return pye57.E57(str(path), mode="r")
     except Exception as exc:  # libE57 raises its own exception types
         raise CloudIOError(f"{path}: cannot read E57: {exc}") from None
+
+
+def read_e57(path: str | Path) -> list[PosedScan]:
+    """Every scan of an E57 file with its pose (identity when it has none). Raises
+    CloudIOError when the file cannot be read."""
+    e57 = _open_e57(path)
     out = []
     try:
         for i in range(e57.scan_count):
@@ -108,12 +114,7 @@ def read_e57_positions(path: str | Path) -> F64:
     """The (S, 3) positions of the scanner at every scan of an E57 file (its poses'
     translations; NaN for a scan without a pose), without reading the points. Raises
     CloudIOError when the file cannot be read."""
-    import pye57
-
-    try:
-        e57 = pye57.E57(str(path), mode="r")
-    except Exception as exc:  # libE57 raises its own exception types
-        raise CloudIOError(f"{path}: cannot read E57: {exc}") from None
+    e57 = _open_e57(path)
     try:
         out = np.full((e57.scan_count, 3), np.nan)
         for i in range(e57.scan_count):

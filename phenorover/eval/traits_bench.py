@@ -168,8 +168,8 @@ def record_times(bench: Bench, one: float | None, five: float | None, why: str =
             "one 60-plot survey",
             one,
             "one_s",
-            "the field map and the six heritability fits (about 4 s) drawn and fitted on "
-            "the second core while the rays are walked",
+            "the field map and the six heritability fits drawn and fitted on the second "
+            "core while the rays are walked",
         ),
         ("a season of five dates", five, "season_s", "the dates read and computed in parallel"),
     ):

@@ -149,10 +149,10 @@ def exact_cover(
     # optimality; with 1-2 workers it stalls even on tiny covers, whatever the core count.
     solver.parameters.num_workers = workers or 8
     solver.parameters.random_seed = seed
-    # The workers' portfolio run in deterministic batches: a field has many covers of
-    # the fewest locations, and the one a free-running portfolio returns depends on
-    # which thread got there first, so one field gave tours of 127-156 m from run to
-    # run. A cover proven optimal within the time limit is now the same on every run.
+    # The workers' portfolio in deterministic batches: a field has many covers of the
+    # fewest locations, and the one a free-running portfolio returns depends on which
+    # thread gets there first (and with it the tour). A cover proven optimal within
+    # the time limit is then the same on every run and under any load.
     solver.parameters.interleave_search = True
     code = solver.solve(m)
     if code not in (cp_model.OPTIMAL, cp_model.FEASIBLE):

@@ -82,12 +82,21 @@ def quality_of(traits: dict[str, float], min_seen: float) -> str:
 
 
 def trait_table(
-    xy: F64, h: F64, field: Field, records: list[Record], cfg: TraitsConfig, date: str
+    xy: F64,
+    h: F64,
+    field: Field,
+    records: list[Record],
+    cfg: TraitsConfig,
+    date: str,
+    plot: I64 | None = None,
+    hidden: I64 | None = None,
 ) -> TraitTable:
     """The :class:`TraitTable` of points ``xy`` (N, 2) at heights ``h`` above the
-    ground over ``field``'s plots."""
+    ground over ``field``'s plots; ``plot``: each point's plot, when already found
+    (:func:`common.cropmodel.assign_plots`); ``hidden``: each plot's voxels hidden
+    behind foliage (:mod:`.hidden`; none without)."""
     boxes = field.plot_boxes
-    p = assign_plots(xy, boxes, field.plot_row, field.plot_col, 0.0)
+    p = assign_plots(xy, boxes, field.plot_row, field.plot_col, 0.0) if plot is None else plot
     inside = np.flatnonzero(p >= 0)
     order = inside[np.argsort(p[inside], kind="stable")]
     ends = np.cumsum(np.bincount(p[inside], minlength=len(boxes)))
@@ -96,7 +105,7 @@ def trait_table(
     for k in range(len(boxes)):
         idx = order[(ends[k - 1] if k else 0) : ends[k]]
         foot = boxes[k, [0, 1, 3, 4]]
-        t = plot_traits(xy[idx], h[idx], foot, cfg.definition)
+        t = plot_traits(xy[idx], h[idx], foot, cfg.definition, 0 if hidden is None else hidden[k])
         quality.append(quality_of(t, cfg.min_seen))
         values[k] = [t[n] for n in NAMES]
     return TraitTable(records, values, quality, date, cfg.definition)
@@ -151,17 +160,18 @@ def compute_traits(
     h = xyz[:, 2] - base.height(xyz[:, 0], xyz[:, 1])
     if offset is not None:
         h -= offset.at(xyz[:, 0], xyz[:, 1])
-    table = trait_table(xyz[:, :2], h, inp.field, inp.records, cfg, inp.date)
+    fld = inp.field
+    plot = assign_plots(xyz[:, :2], fld.plot_boxes, fld.plot_row, fld.plot_col, 0.0)
+    hidden = None
     views = inp.scan_views()
     if views is not None:
         # the walk's layers stand on the ground the heights do (an offset of
         # millimetres moves none of them)
-        hidden = hidden_voxels(xyz, h, views, keep, inp.field, base, cfg.definition)
-        vol = table.values[:, NAMES.index("volume_voxel")]
-        vol += np.where(np.isfinite(vol), hidden * cfg.definition.voxel**3, 0.0)
+        hidden = hidden_voxels(xyz, h, plot, views, keep, fld, base, cfg.definition)
         timings["hidden"] = time.perf_counter() - t
         log.info("hidden voxels: %d in %d plots (%.1f s)", hidden.sum(), (hidden > 0).sum(),
                  timings["hidden"])  # fmt: skip
+    table = trait_table(xyz[:, :2], h, fld, inp.records, cfg, inp.date, plot, hidden)
     crop = crop_model(
         xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date
     )

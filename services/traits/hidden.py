@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import CanopyDefinition, footprint_cells
+from common.cropmodel import plot_bands
 from common.field import Field
 from services.traits.ground import GroundModel
 from services.traits.run import Views
@@ -42,12 +43,13 @@ MAX_LAYERS = 100  # layers of voxels above the ground a canopy may fill (10 m at
 
 
 def hidden_voxels(
-    xyz: F64, h: F64, views: Views, keep: B, field: Field, ground: GroundModel,
+    xyz: F64, h: F64, plot: I64, views: Views, keep: B, field: Field, ground: GroundModel,
     d: CanopyDefinition,
 ) -> I64:  # fmt: skip
     """Per plot, the hidden voxels inside its canopy's hull (see the module
     docstring): ``xyz`` (N, 3) the points (``keep`` of the run's cloud, whose
-    ``views`` say where each was seen from), ``h`` their heights above the ground."""
+    ``views`` say where each was seen from), ``h`` their heights above the ground,
+    ``plot`` the plot whose footprint holds each (-1 none)."""
     boxes = field.plot_boxes[:, [0, 1, 3, 4]]
     dims = np.array([footprint_cells(b, d.voxel) for b in boxes], dtype=np.int64)
     canopy = h >= d.min_height
@@ -55,19 +57,16 @@ def hidden_voxels(
     per_plot = dims[:, 0] * dims[:, 1] * layers
     offset = np.concatenate([[0], np.cumsum(per_plot)]).astype(np.int64)
     passed = np.zeros(int(offset[-1]), dtype=np.bool_)
-    row_lo, col_lo, table = _bands(field)
+    row_lo, col_lo, table = plot_bands(field.plot_boxes, field.plot_row, field.plot_col)
     _walk(
         np.ascontiguousarray(xyz), np.ascontiguousarray(views.source[keep]),
         np.ascontiguousarray(views.origins), ground.z, ground.x0, ground.y0, ground.cell,
         row_lo, col_lo, table, np.ascontiguousarray(boxes), dims, offset, layers, d.voxel,
         passed,
     )  # fmt: skip
-    from common.cropmodel import assign_plots
-
-    plot = assign_plots(xyz[canopy, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
-    order = np.flatnonzero(plot >= 0)
+    order = np.flatnonzero(canopy & (plot >= 0))
     order = order[np.argsort(plot[order], kind="stable")]
-    pts, ph = xyz[canopy][order, :2], h[canopy][order]
+    pts, ph = xyz[order, :2], h[order]
     ends = np.cumsum(np.bincount(plot[order], minlength=len(boxes)))
     out = np.zeros(len(boxes), dtype=np.int64)
     for k in range(len(boxes)):
@@ -75,20 +74,6 @@ def hidden_voxels(
         grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
         out[k] = _hidden_in_hull(pts[mine], ph[mine], boxes[k], grid, d.voxel)
     return out
-
-
-def _bands(field: Field) -> tuple[F64, F64, F64]:
-    """The lookup :func:`_walk` finds a sample's plot by (as
-    :func:`common.cropmodel.assign_plots`): each row band's lower y, each column
-    band's lower x and the plot in each (row, column) band (-1 none; float, as numba
-    takes one array type less)."""
-    b, row, col = field.plot_boxes, field.plot_row, field.plot_col
-    nrows, ncols = int(row.max()) + 1, int(col.max()) + 1
-    table = np.full((nrows, ncols), -1.0)
-    table[row, col] = np.arange(len(b))
-    row_lo = np.array([b[row == r, 1].min() for r in range(nrows)])
-    col_lo = np.array([b[col == c, 0].min() for c in range(ncols)])
-    return row_lo, col_lo, table
 
 
 def _hidden_in_hull(xy: F64, h: F64, box: F64, passed: B, v: float) -> int:
@@ -120,7 +105,7 @@ def _hidden_in_hull(xy: F64, h: F64, box: F64, passed: B, v: float) -> int:
 @nb.njit(parallel=True, cache=True, error_model="numpy")
 def _walk(
     pts: F64, source: I64, origins: F64, gz: F64, gx0: float, gy0: float, gcell: float,
-    row_lo: F64, col_lo: F64, table: F64, boxes: F64, dims: I64, offset: I64,
+    row_lo: F64, col_lo: F64, table: I64, boxes: F64, dims: I64, offset: I64,
     layers: int, v: float, passed: B,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """Mark in ``passed`` every voxel of a plot's lattice that a ray from
@@ -140,7 +125,7 @@ def _walk(
             c = np.searchsorted(col_lo, x, side="right") - 1
             if r < 0 or c < 0 or r >= nrows or c >= ncols or table[r, c] < 0:
                 continue
-            p = int(table[r, c])
+            p = table[r, c]
             ix = math.floor((x - boxes[p, 0]) / v)
             iy = math.floor((y - boxes[p, 1]) / v)
             if ix < 0 or iy < 0 or ix >= dims[p, 0] or iy >= dims[p, 1]:

@@ -75,17 +75,13 @@ class RunInput:
     date_source: str
     cloud: F64
     # each point's scan (N,): where it was seen from is read from registered.e57
-    # when the traits are computed (:func:`read_views`), after the run is checked
+    # when the traits are computed (:func:`read_views`), after the run is checked;
+    # None, or no registered.e57: the voxel volume counts only the voxels hit
     source: npt.NDArray[np.int64] | None = None
-    # or given: each point's scan and each scanner position; None when the run does
-    # not tell (no registered.e57), and the voxel volume counts only what was hit
-    views: Views | None = None
 
     def scan_views(self) -> Views | None:
         """Where each point was seen from (see :func:`read_views`)."""
-        if self.views is None and self.source is not None:
-            return read_views(self.run_dir, self.source)
-        return self.views
+        return None if self.source is None else read_views(self.run_dir, self.source)
 
 
 @dataclasses.dataclass(frozen=True)

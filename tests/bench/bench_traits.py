@@ -61,7 +61,7 @@ from services.sim.trial import TrialConfig
 from services.sim.world import World, WorldConfig
 from services.traits.compute import RunTraits, compute_traits
 from services.traits.config import TraitsConfig
-from services.traits.run import RunInput, read_views
+from services.traits.run import RunInput
 from services.traits.series import season
 from services.traits.stats import heritability
 from tests.bench.bench_registration import config as register_config
@@ -128,7 +128,7 @@ def simulate(
         date=date.isoformat(),
         date_source="the benchmark",
         cloud=pts,
-        views=read_views(run, src),
+        source=src,
     )
     return compute_traits(inp, TraitsConfig()), truth, reg_s
 

@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import CanopyDefinition, plot_traits
+from common.cropmodel import assign_plots
 from common.field import load_field
 from services.traits.ground import GroundModel
 from services.traits.hidden import hidden_voxels
@@ -47,8 +48,9 @@ def _volume(blocks: list[F64], origins: F64) -> tuple[float, float]:
         0.0, 0.0, 0.25, np.zeros((23, 67)), np.ones((23, 67), bool), np.ones((23, 67), np.int64)
     )
     h = xyz[:, 2].copy()
+    plot = assign_plots(xyz[:, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
     hidden = hidden_voxels(
-        xyz, h, Views(source, origins), np.ones(len(xyz), bool), field, ground, D
+        xyz, h, plot, Views(source, origins), np.ones(len(xyz), bool), field, ground, D
     )
     box = field.plot_boxes[0, [0, 1, 3, 4]]
     inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
