@@ -44,7 +44,7 @@ from scipy.spatial import cKDTree
 from common.poses import F64, apply, inv
 from services.register.graph import PairResult, TargetObservation, optimise_graph
 from services.register.poses import difference
-from services.register.workers import starmap
+from common.workers import starmap
 
 log = logging.getLogger(__name__)
 Pos = Annotated[float, msgspec.Meta(gt=0)]

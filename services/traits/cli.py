@@ -21,14 +21,16 @@ written.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import sys
 import time
 from pathlib import Path
 
-from services.traits.compute import NO_POINTS, OCCLUDED, OK, RunTraits, compute_run
+from services.traits.compute import NO_POINTS, OCCLUDED, OK, RunTraits, compute_traits, read_run
 from services.traits.config import TraitsConfig, add_config_arguments, resolve
+from services.traits.fits import Fits
 from services.traits.outputs import write_outputs
 from services.traits.run import RunError
 
@@ -59,10 +61,18 @@ def run_traits(
     run_dir: Path, cfg: TraitsConfig, out: Path | None = None, date: str | None = None
 ) -> tuple[RunTraits, list[str]]:
     """Compute one run's traits and write its outputs into ``out`` (default:
-    ``run_dir``); returns them and the names of the files written. Raises RunError."""
-    rt = compute_run(run_dir, cfg, date)
-    t = time.perf_counter()
-    names = write_outputs(rt, cfg, out or run_dir)
+    ``run_dir``); returns them and the names of the files written. Raises RunError.
+    The heritabilities are fitted in a worker process (:mod:`.fits`) when the field
+    book names entries."""
+    inp, read = read_run(run_dir, date)
+    with contextlib.ExitStack() as stack:
+        fits = stack.enter_context(Fits()) if any(r.entry for r in inp.records) else None
+        rt = compute_traits(inp, cfg)
+        rt.timings["read"] = read
+        t = time.perf_counter()
+        if fits is not None:
+            fits.submit(rt.table)
+        names = write_outputs(rt, cfg, out or run_dir, None if fits is None else fits.next)
     rt.timings["write"] = time.perf_counter() - t
     log.info("wrote %s (%.1f s)", ", ".join(names), rt.timings["write"])
     return rt, names
@@ -87,11 +97,15 @@ def run_season(runs: list[Path], cfg: TraitsConfig, out: Path | None) -> Path:
     from services.traits.series import season
 
     t0 = time.monotonic()
-    s = season(runs, cfg)
-    dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
-    for rt in s.runs:
-        write_outputs(rt, cfg, dest / rt.run_dir.name)
-        print(_summary(rt, dest / rt.run_dir.name, sum(rt.timings.values())), flush=True)
+    with Fits() as fits:
+        s = season(runs, cfg)
+        dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
+        entries = any(r.entry for r in s.runs[0].records)
+        for rt in s.runs if entries else ():
+            fits.submit(rt.table)
+        for rt in s.runs:
+            write_outputs(rt, cfg, dest / rt.run_dir.name, fits.next if entries else None)
+            print(_summary(rt, dest / rt.run_dir.name, sum(rt.timings.values())), flush=True)
     names = write_season(s, dest, cfg.figures)
     print(
         f"season of {len(s.runs)} dates ({s.runs[0].date} to {s.runs[-1].date}) in "

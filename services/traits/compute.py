@@ -198,17 +198,23 @@ def compute_traits(
     )
 
 
-def compute_run(
-    run_dir: str | Path, cfg: TraitsConfig | None = None, date: str | None = None
-) -> RunTraits:
-    """Read ``run_dir`` and compute its traits (``date``: ``--date``, see
-    :mod:`.run`); raises RunError."""
+def read_run(run_dir: str | Path, date: str | None = None) -> tuple[RunInput, float]:
+    """:func:`.run.load_run`, logged, and the seconds it took; raises RunError."""
     t = time.perf_counter()
     inp = load_run(run_dir, date)
     read = time.perf_counter() - t
     log.info(
         "read %s: %d points, %d plots (%.1f s)", run_dir, len(inp.cloud), inp.field.n_plots, read
     )
+    return inp, read
+
+
+def compute_run(
+    run_dir: str | Path, cfg: TraitsConfig | None = None, date: str | None = None
+) -> RunTraits:
+    """Read ``run_dir`` and compute its traits (``date``: ``--date``, see
+    :mod:`.run`); raises RunError."""
+    inp, read = read_run(run_dir, date)
     out = compute_traits(inp, cfg or TraitsConfig())
     out.timings["read"] = read
     return out

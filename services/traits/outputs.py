@@ -36,6 +36,7 @@ from common.files import atomic_write
 from services.traits.compute import NAMES, RunTraits, TraitTable
 from services.traits.config import TraitsConfig
 from services.traits.run import Record
+from services.traits.stats import Heritability
 
 BOOK = BOOK_COLUMNS
 # decimals per unit: mm for heights, 0.1 L for volumes, 0.001 for shares
@@ -159,8 +160,15 @@ def options_toml(rt: RunTraits, cfg: TraitsConfig) -> str:
     return f"# phenorover traits {rt.run_dir}\n# date: {when}\n{dump_toml(cfg)}"
 
 
-def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
-    """Write every output of one run into ``out``; returns the names written."""
+def write_outputs(
+    rt: RunTraits,
+    cfg: TraitsConfig,
+    out: Path,
+    h2: Callable[[], dict[str, Heritability]] | None = None,
+) -> list[str]:
+    """Write every output of one run into ``out``; returns the names written. ``h2``:
+    where the run's heritabilities come from when its field book names entries (a
+    worker's :meth:`.fits.Fits.next`; default: fitted here)."""
     out.mkdir(parents=True, exist_ok=True)
     t = rt.table
     files = {
@@ -176,21 +184,21 @@ def write_outputs(rt: RunTraits, cfg: TraitsConfig, out: Path) -> list[str]:
 
         atomic_write(out / "fieldmap.png", lambda p: draw(rt, p))
         names.append("fieldmap.png")
-    from services.traits import breeding
-
-    h2 = None
-    if breeding.has_entries(t):
-        h2 = breeding.heritabilities(t)
-        atomic_write(out / "entries.csv", text_of(breeding.entries_csv(t)))
-        atomic_write(out / "heritability.csv", text_of(breeding.heritability_csv(h2)))
-        names += ["entries.csv", "heritability.csv"]
-    atomic_write(out / "traits.md", text_of(breeding.report(rt, h2)))
-    names.append("traits.md")
     if rt.crop is not None:  # what `phenorover plan --from-survey` plans on
         from common.cropmodel import write as write_crop
 
         write_crop(out / "crop.json", rt.crop)
         names.append("crop.json")
+    from services.traits import breeding
+
+    fitted = None
+    if breeding.has_entries(t):
+        atomic_write(out / "entries.csv", text_of(breeding.entries_csv(t)))
+        fitted = breeding.heritabilities(t) if h2 is None else h2()
+        atomic_write(out / "heritability.csv", text_of(breeding.heritability_csv(fitted)))
+        names += ["entries.csv", "heritability.csv"]
+    atomic_write(out / "traits.md", text_of(breeding.report(rt, fitted)))
+    names.append("traits.md")
     atomic_write(out / "traits.toml", text_of(options_toml(rt, cfg)))
     names.append("traits.toml")
     return names

@@ -169,6 +169,13 @@ def _failed(
     )
 
 
+def import_statsmodels() -> None:
+    """Import what :func:`heritability` fits with (a second or so): for a worker
+    process to do ahead of its first fit (:mod:`.fits`)."""
+    import pandas  # noqa: F401
+    import statsmodels.formula.api  # noqa: F401
+
+
 def heritability(entries: Sequence[str], reps: Sequence[int | None], values: F64) -> Heritability:
     """H2 from variance components of a linear mixed model fitted by REML (Patterson &
     Thompson 1971, Biometrika 58:545): entry random, rep fixed when every plot has one

@@ -1,5 +1,7 @@
-"""Independent jobs of the registration (the pairwise alignments) on several cores: each
-job whole in one single-threaded worker process.
+"""Jobs in worker processes: :func:`starmap` runs independent jobs (the registration's
+pairwise alignments) on several cores, each job whole in one single-threaded worker;
+:class:`Worker` is one process a program hands jobs to and goes on with its own work
+(the traits' heritability fits while it draws and writes).
 
 Why processes and not threads: small_gicp holds the GIL while it aligns, so Python
 threads run its calls one after the other. Why not its OpenMP threads: they meet at a
@@ -58,7 +60,7 @@ def starmap(fn: Callable[..., T], jobs: Sequence[tuple[Any, ...]], workers: int)
     try:
         for _ in range(n):
             here, there = ctx.Pipe()
-            p = ctx.Process(target=_serve, args=(fn, there), daemon=True, name="register-worker")
+            p = ctx.Process(target=_serve, args=(fn, there), daemon=True, name="worker")
             p.start()
             there.close()  # so the worker's death reads as EOF here
             procs.append(p)
@@ -106,7 +108,61 @@ def _run(
 
 def _died(p: BaseProcess, job: int) -> WorkerError:
     p.join(timeout=5)
-    return WorkerError(f"registration worker {p.pid} ended (exit code {p.exitcode}) in job {job}")
+    return WorkerError(f"{p.name} {p.pid} ended (exit code {p.exitcode}) in job {job}")
+
+
+class Worker:
+    """One spawned process serving ``fn`` while its parent goes on: ``submit`` queues a
+    job, ``result`` waits for the oldest one's result (its exception raised here, the
+    worker's death as :class:`WorkerError`). ``initializer`` runs in the worker as it
+    starts, before any job: slow imports done while the parent works. A context
+    manager: leaving it ends the worker, at once when an exception (SIGTERM's
+    SystemExit included) leaves it. The same needs as :func:`starmap`'s."""
+
+    def __init__(
+        self,
+        fn: Callable[..., Any],
+        initializer: Callable[[], object] | None = None,
+        name: str = "worker",
+    ) -> None:
+        ctx = multiprocessing.get_context("spawn")  # not fork: see starmap
+        here, there = ctx.Pipe()
+        self._proc = ctx.Process(
+            target=_serve, args=(fn, there, initializer), daemon=True, name=name
+        )
+        self._proc.start()
+        there.close()
+        self._conn = here
+        self._sent = self._got = 0
+
+    def submit(self, *args: Any) -> None:
+        try:
+            self._conn.send((self._sent, args))
+        except OSError:
+            raise _died(self._proc, self._sent) from None
+        self._sent += 1
+
+    def result(self) -> Any:
+        if self._got == self._sent:
+            raise RuntimeError("no job submitted to wait for")
+        try:
+            _, done, value = self._conn.recv()
+        except EOFError:
+            raise _died(self._proc, self._got) from None
+        self._got += 1
+        if not done:
+            raise value
+        return value
+
+    def close(self, ok: bool = True) -> None:
+        """End the worker: after its jobs when ``ok``, else at once."""
+        _end([self._conn], [self._proc], ok)
+
+    def __enter__(self) -> Worker:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *_: object) -> None:
+        self.close(ok=kind is None)
 
 
 def _end(conns: list[Connection], procs: list[BaseProcess], ok: bool) -> None:
@@ -123,10 +179,14 @@ def _end(conns: list[Connection], procs: list[BaseProcess], ok: bool) -> None:
         p.join()
 
 
-def _serve(fn: Callable[..., Any], conn: Connection) -> None:
+def _serve(
+    fn: Callable[..., Any], conn: Connection, initializer: Callable[[], object] | None = None
+) -> None:
     """A worker: jobs from ``conn`` until None or the parent is gone."""
     # Ctrl-C reaches the whole process group: the parent's handling ends the workers
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if initializer is not None:
+        initializer()
     while True:
         try:
             msg = conn.recv()

@@ -1,6 +1,6 @@
-"""The pairwise alignments' worker processes: the same results in the same order as
-one process, a job's error or a worker's death raised to the caller, and no worker
-left running after the call, also when SIGTERM interrupts it."""
+"""Worker processes (the pairwise alignments, the heritability fits): the same results
+in the same order as one process, a job's error or a worker's death raised to the
+caller, and no worker left running after the call, also when SIGTERM interrupts it."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from typing import IO
 
 import pytest
 
-from services.register.workers import WorkerError, starmap
+from common.workers import Worker, WorkerError, starmap
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -73,8 +73,8 @@ def test_a_dead_worker_is_an_error_not_a_hang() -> None:
 def test_sigterm_ends_the_workers_at_once() -> None:
     code = (
         "import signal, sys\n"
-        "from services.register.workers import starmap\n"
-        "from tests.register.test_workers import _say_and_block\n"
+        "from common.workers import starmap\n"
+        "from tests.common.test_workers import _say_and_block\n"
         "signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))\n"  # as the CLI does
         "if __name__ == '__main__':\n"
         "    starmap(_say_and_block, [(60.0,), (60.0,)], 2)\n"
@@ -99,3 +99,46 @@ def test_sigterm_ends_the_workers_at_once() -> None:
         for fd in ready:
             os.close(fd)
         fds = [fd for fd in fds if fd not in ready]
+
+
+def _pid_and_env(name: str) -> tuple[int, str | None]:
+    return os.getpid(), os.environ.get(name)
+
+
+def _set_env() -> None:
+    os.environ["PHENOROVER_TEST_WORKER"] = "initialised"
+
+
+def test_a_worker_serves_jobs_in_order_beside_its_parent() -> None:
+    with Worker(_pid_and_env, _set_env, "test-worker") as w:
+        for _ in range(3):
+            w.submit("PHENOROVER_TEST_WORKER")
+        got = [w.result() for _ in range(3)]
+    pid = got[0][0]
+    assert pid != os.getpid()
+    # one process, its initializer run before the first job
+    assert got == [(pid, "initialised")] * 3
+    assert not multiprocessing.active_children()
+
+
+def test_a_workers_error_and_death_reach_the_caller() -> None:
+    with Worker(math.sqrt) as w:
+        w.submit(-1.0)
+        w.submit(4.0)
+        with pytest.raises(ValueError, match="math domain error"):
+            w.result()
+        assert w.result() == 2.0
+        with pytest.raises(RuntimeError, match="no job"):
+            w.result()
+    with Worker(os._exit, name="dying") as w:
+        w.submit(3)
+        with pytest.raises(WorkerError, match=r"dying \d+ ended \(exit code 3\)"):
+            w.result()
+    assert not multiprocessing.active_children()
+
+
+def test_an_exception_ends_the_worker_at_once() -> None:
+    with pytest.raises(KeyboardInterrupt), Worker(_say_and_block) as w:
+        w.submit(60.0)
+        raise KeyboardInterrupt
+    assert not multiprocessing.active_children()
