@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from services.planner.occlusion import plot_hidden, side_hidden
-from services.planner.raycast import GridArgs, Table, cell_of, first_hit
+from services.planner.raycast import GridArgs, Table, cell_of, first_hit, record
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -53,7 +53,7 @@ def _sample(
     number of rays cast (0 or 1)."""
     rmin, rmax, vmin, vmax, hmin, hspan = lim
     boxes = grid[0]
-    dims, offset, counts, rng = out
+    dims, offset = out[0], out[1]
     c0 = faces[f, 0]
     uu = faces[f, 1] + (su + 0.5) / samples * (faces[f, 2] - faces[f, 1])
     vv = faces[f, 3] + (sv + 0.5) / samples * (faces[f, 4] - faces[f, 3])
@@ -93,9 +93,7 @@ def _sample(
         hc = cell_of(hp, o[0] + t * dx, o[1] + t * dy, o[2] + t * dz, boxes, dims, offset)
         if hc != cell:
             return 1
-    counts[a, cell] += 1
-    if dist < rng[a, cell]:
-        rng[a, cell] = dist
+    record(a, p, cell, dist, out)
     return 1 - known
 
 
@@ -122,8 +120,7 @@ def _planar_side(
     ``nz`` layers each. Returns the rays cast."""
     rmin, rmax, vmin, vmax, hmin, hspan = lim
     boxes = grid[0]
-    dims, _, counts, rng = out
-    nz = dims[p, 2]
+    nz = out[0][p, 2]
     rays = 0
     for col in range((s1 - s0) // nz):
         f0 = s0 + col * nz
@@ -190,9 +187,7 @@ def _planar_side(
                     el = math.degrees(math.atan2(dz, d))
                     if el < vmin or el > vmax:
                         continue
-                    counts[a, cell] += 1
-                    if dist < rng[a, cell]:
-                        rng[a, cell] = dist
+                    record(a, p, cell, dist, out)
     return rays
 
 
@@ -210,22 +205,16 @@ def exact_kernel(
 ) -> npt.NDArray[np.int64]:
     # faces[f] = [plane, u0, u1, v0, v1]; fint[f] = [plot, cell, axis, sign]; the faces of
     # side s (= axis * 2 + (sign > 0)) of plot p are side_start[6p + s] .. [6p + s + 1]
-    rmax = lim[1]
     boxes = grid[0]
-    _, _, counts, rng = out
+    base = out[2]
     k = origins.shape[0]
     nrays = np.zeros(k, dtype=np.int64)
     for a in nb.prange(k):
-        counts[a, :] = 0
-        rng[a, :] = np.inf
         o = origins[a]
         last = -1
         for p in range(boxes.shape[0]):
-            gx = max(boxes[p, 0] - o[0], 0.0, o[0] - boxes[p, 3])
-            gy = max(boxes[p, 1] - o[1], 0.0, o[1] - boxes[p, 4])
-            gz = max(boxes[p, 2] - o[2], 0.0, o[2] - boxes[p, 5])
-            if gx * gx + gy * gy + gz * gz > rmax * rmax:
-                continue
+            if base[a, p] < 0:
+                continue  # beyond the scanner's range
             if cull:
                 blocker = plot_hidden(o, p, last, grid)
                 if blocker >= 0:

@@ -22,11 +22,14 @@ I64 = npt.NDArray[np.int64]
 _PAR = 1e-12
 
 # What the kernels take, as one argument each (numba passes tuples by value, at no
-# cost): the binned boxes, ``BoxGrid.args``; and the visibility table being filled,
-# (dims, offset, counts, rng) with ``Field.cell_dims``, ``Field.cell_offset`` and the
-# per-candidate hit counts and nearest ranges.
+# cost): the binned boxes, ``BoxGrid.args``; and the visibility table being filled for
+# a chunk of candidates, (dims, offset, base, counts, rng) with ``Field.cell_dims`` and
+# ``Field.cell_offset``; ``counts`` and ``rng``, flat, hold the hit counts and nearest
+# ranges of the cells of the plots within range of each candidate, those of plot p
+# for candidate a from ``base[a, p]`` (-1: p is out of a's range), so the table grows
+# with the plots in range, not with the field (:func:`record`).
 GridArgs = tuple[F64, float, float, float, float, int, int, I64, I64, float]
-Table = tuple[I64, I64, npt.NDArray[np.int32], npt.NDArray[np.float32]]
+Table = tuple[I64, I64, I64, npt.NDArray[np.int32], npt.NDArray[np.float32]]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -201,6 +204,16 @@ def cell_of(p: int, x: float, y: float, z: float, boxes: F64, dims: I64, offset:
     j = min(max(j, 0), ny - 1)
     k = min(max(k, 0), nz - 1)
     return offset[p] + (i * ny + j) * nz + k
+
+
+@nb.njit(cache=True, error_model="numpy")
+def record(a: int, p: int, cell: int, dist: float, out: Table) -> None:
+    """Candidate ``a`` sees ``cell`` (of plot ``p``) once more, at ``dist`` metres."""
+    _, offset, base, counts, rng = out
+    k = base[a, p] + cell - offset[p]
+    counts[k] += 1
+    if dist < rng[k]:
+        rng[k] = dist
 
 
 @nb.njit(parallel=True, cache=True, error_model="numpy")

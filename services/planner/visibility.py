@@ -29,23 +29,26 @@ import scipy.sparse as sp
 from common.field import Field, ScannerModel
 from services.planner.exact import exact_kernel
 from services.planner.faces import exposed_faces
-from services.planner.raycast import GridArgs, Table, build_grid, cell_of, first_hit
+from services.planner.raycast import GridArgs, Table, build_grid, cell_of, first_hit, record
 
 log = logging.getLogger(__name__)
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+I32 = npt.NDArray[np.int32]
+F32 = npt.NDArray[np.float32]
 Progress = Callable[[int, int], None]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Visibility:
-    """Sparse visibility table. ``cand`` indexes ``Field.cand_xy`` (not the ids)."""
+    """Sparse visibility table. ``cand`` indexes ``Field.cand_xy`` (not the ids); 32-bit,
+    as a field of thousands of plots has tens of millions of pairs."""
 
-    cand: I64
-    cell: I64
-    hits: I64
-    range_min: F64  # metres from the optical centre to the nearest seen point
+    cand: I32
+    cell: I32
+    hits: I32
+    range_min: F32  # metres from the optical centre to the nearest seen point
     n_candidates: int
     n_cells: int
     rays: int
@@ -92,26 +95,73 @@ def _grid_kernel(
     out: Table,
 ) -> None:
     boxes = grid[0]
-    dims, offset, counts, rng = out
+    dims, offset, base = out[0], out[1], out[2]
     for a in nb.prange(origins.shape[0]):
-        counts[a, :] = 0
-        rng[a, :] = np.inf
         ox, oy, oz = origins[a, 0], origins[a, 1], origins[a, 2]
         for r in range(dirs.shape[0]):
             dx, dy, dz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
             p, t = first_hit(ox, oy, oz, dx, dy, dz, rmax, grid)
-            if p >= 0 and t >= rmin:
+            # a hit within rmax lies in a plot within rmax: base[a, p] >= 0
+            if p >= 0 and t >= rmin and base[a, p] >= 0:
                 c = cell_of(p, ox + t * dx, oy + t * dy, oz + t * dz, boxes, dims, offset)
-                counts[a, c] += 1
-                if t < rng[a, c]:
-                    rng[a, c] = t
+                record(a, p, c, t, out)
 
 
-def _chunks(n: int, n_cells: int) -> list[tuple[int, int]]:
-    # Small chunks into one reused dense buffer (int32 + float32 per cell, <= 64 MB):
-    # fresh large buffers per chunk cost more in page faults than the casting itself.
-    size = max(1, min(n, 32, (64 << 20) // max(1, 8 * n_cells)))
-    return [(s, min(n, s + size)) for s in range(0, n, size)]
+CHUNK = 32  # candidates per kernel call: both cores busy, progress every few seconds
+
+
+class _Scratch:
+    """The flat tables of a chunk of candidates (:data:`raycast.Table`): the cells of
+    the plots within range of each, laid out one candidate after the other, in
+    buffers reused from chunk to chunk (fresh large ones cost more in page faults than
+    the casting) and grown when a chunk needs more."""
+
+    def __init__(self, field: Field, rmax: float) -> None:
+        self.boxes = field.plot_boxes
+        self.offset = field.cell_offset
+        self.ncells = np.diff(field.cell_offset)
+        self.rmax = rmax
+        self.counts = np.zeros(0, dtype=np.int32)
+        self.rng = np.zeros(0, dtype=np.float32)
+
+    def table(self, o: F64, dims: I64) -> tuple[Table, I64, I64]:
+        """The zeroed table of the origins ``o`` (k, 3); with, for each slot of the
+        flat buffers' plots, the plot and the candidate row it belongs to."""
+        b = self.boxes
+        # the plots a candidate's range reaches: the nearest point of the box within rmax
+        gx = np.maximum(
+            np.maximum(b[None, :, 0] - o[:, None, 0], 0.0), o[:, None, 0] - b[None, :, 3]
+        )
+        gy = np.maximum(
+            np.maximum(b[None, :, 1] - o[:, None, 1], 0.0), o[:, None, 1] - b[None, :, 4]
+        )
+        gz = np.maximum(
+            np.maximum(b[None, :, 2] - o[:, None, 2], 0.0), o[:, None, 2] - b[None, :, 5]
+        )
+        near = gx * gx + gy * gy + gz * gz <= self.rmax * self.rmax
+        rows, plots = np.nonzero(near)
+        sizes = self.ncells[plots]
+        starts = np.concatenate([[0], np.cumsum(sizes)])
+        base = np.full(near.shape, -1, dtype=np.int64)
+        base[rows, plots] = starts[:-1]
+        total = int(starts[-1])
+        if total > len(self.counts):
+            self.counts = np.zeros(total, dtype=np.int32)
+            self.rng = np.zeros(total, dtype=np.float32)
+        counts, rng = self.counts[:total], self.rng[:total]
+        counts[:] = 0
+        rng[:] = np.inf
+        return (dims, self.offset, base, counts, rng), starts, np.column_stack([rows, plots])
+
+    def pairs(self, table: Table, starts: I64, owner: I64) -> tuple[I64, I64, I32, F32]:
+        """The (candidate row, cell, hits, nearest range) of every cell seen, by row and
+        then cell, as the dense table's ``np.nonzero`` gave them."""
+        counts, rng = table[3], table[4]
+        k = np.flatnonzero(counts)
+        q = np.searchsorted(starts, k, side="right") - 1
+        rows, plots = owner[q, 0], owner[q, 1]
+        cells = k - starts[q] + self.offset[plots]
+        return rows, cells, counts[k], rng[k]
 
 
 def compute_visibility(
@@ -148,20 +198,17 @@ def compute_visibility(
         cull = bool(np.all(g.boxes[:, 2] <= 0.0) and np.all(g.boxes[:, 5] >= scanner.height))
         cull = cull and cull_sides
     hspan = scanner.horizontal_end_deg - scanner.horizontal_start_deg
-    out_c: list[I64] = []
-    out_k: list[I64] = []
-    out_h: list[I64] = []
-    out_r: list[F64] = []
+    out_c: list[I32] = []
+    out_k: list[I32] = []
+    out_h: list[I32] = []
+    out_r: list[F32] = []
     rays = 0
     t0 = last_log = time.perf_counter()
-    chunks = _chunks(n, nc)
-    size = chunks[0][1] - chunks[0][0] if chunks else 0
-    buf_c = np.zeros((size, nc), dtype=np.int32)
-    buf_r = np.zeros((size, nc), dtype=np.float32)
-    for s, e in chunks:
+    scratch = _Scratch(field, scanner.max_range)
+    for s in range(0, n, CHUNK):
+        e = min(n, s + CHUNK)
         o = np.ascontiguousarray(origins[s:e])
-        counts, rng = buf_c[: e - s], buf_r[: e - s]
-        table = (field.cell_dims, field.cell_offset, counts, rng)
+        table, starts, owner = scratch.table(o, field.cell_dims)
         if mode == "grid":
             _grid_kernel(o, dirs, scanner.min_range, scanner.max_range, g.args, table)
             rays += len(o) * len(dirs)
@@ -176,11 +223,11 @@ def compute_visibility(
             )
             nr = exact_kernel(o, limits, samples, cull, faces, fint, side_start, g.args, table)
             rays += int(nr.sum())
-        ci, ki = np.nonzero(counts)
-        out_c.append(ci.astype(np.int64) + s)
-        out_k.append(ki.astype(np.int64))
-        out_h.append(counts[ci, ki].astype(np.int64))
-        out_r.append(rng[ci, ki].astype(np.float64))
+        ci, ki, hits, near = scratch.pairs(table, starts, owner)
+        out_c.append((ci + s).astype(np.int32))
+        out_k.append(ki.astype(np.int32))
+        out_h.append(hits.copy())
+        out_r.append(near.copy())
         now = time.perf_counter()
         if now - last_log > 2.0 or e == n:
             log.info("visibility (%s): %d/%d candidates, %.1f s", mode, e, n, now - t0)
