@@ -1,18 +1,20 @@
 """How big a field the planner takes on, checked before any visibility work.
 
-The cost of a plan grows with cells x candidates: every candidate location is tested
-against every cell (the exact mode's rays, the grid mode's cell lookups), and the
-visibility table is cut from dense (candidates x cells) buffers. Measured on the
-2-core development machine (exact visibility, exact cover):
+A candidate is tested against the cells of the plots within the scanner's range, and
+the visibility table holds the pairs it sees among them: the cost of a plan grows
+with those *pairs in range*, summed over the candidates (cast one by one; a regular
+field casts one candidate and moves its table to the others, :mod:`.lattice`, but
+its table is as large). Estimated from up to 256 candidates spread over the field:
 
-- ENGR, SPL: 77 x 2,160 = 1.7e5; well under a second.
-- 40 rows x 50 plots (the planning benchmark's largest field): 2,091 x 144,000 = 3.0e8; 28 s in all,
-  5.8 M visible pairs, 0.7 GB peak.
-- 100 x 100 plots: 10,201 x 720,000 = 7.3e9; 137 s and 5.0 GB.
+- ENGR, SPL: 3.3e5 and 1.1e5; well under a second.
+- 40 rows x 50 plots (the planning benchmark's largest field): 1.5e8 pairs in
+  range, 5.8 M seen.
+- 100 x 100 plots: 1.1e9 in range, 36 M seen.
+- 140 x 140 plots: 2.4e9 in range.
 
-The default budget, 1e9, takes fields about three times the benchmark's size and
-refuses the 100 x 100 one with a line saying why, in the service before anything is
-sent to a worker. Workers also run under a hard memory limit (``RLIMIT_DATA``), so an
+The default budget, 2e9, takes the 100 x 100 field and refuses fields beyond about
+twice its size with a line saying why, in the service before anything is sent to a
+worker. Workers also run under a hard memory limit (``RLIMIT_DATA``), so an
 estimate that is wrong ends in an error reply rather than in the machine swapping.
 """
 
@@ -23,15 +25,17 @@ import resource
 from typing import Annotated
 
 import msgspec
+import numpy as np
 
-from common.field import Field, FieldError
+from common.field import Field, FieldError, ScannerModel
 
-DEFAULT_MAX_CELL_CANDIDATES = 1_000_000_000
+DEFAULT_MAX_CELL_CANDIDATES = 2_000_000_000
+_SAMPLE = 256  # candidates the estimate looks at
 DEFAULT_WORKER_MEMORY_MB = 4096
 
 
 class PlanBudget(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``max_cell_candidates``: the largest cells x candidates a plan may need.
+    """``max_cell_candidates``: the most cell-candidate pairs in range a plan may need.
     ``worker_memory_mb``: the data-segment limit of each planning worker (0: none)."""
 
     max_cell_candidates: Annotated[int, msgspec.Meta(gt=0)] = DEFAULT_MAX_CELL_CANDIDATES
@@ -44,30 +48,41 @@ class OverBudget(FieldError):
 
 @dataclasses.dataclass(frozen=True)
 class Estimate:
-    """What a plan of a field will cost: ``pairs`` = cells x candidates, and the bytes
-    of a dense (candidates x cells) visibility table of int32 hits + float32 ranges,
-    which the planner never holds whole but would if it were not cut into chunks."""
+    """What a plan of a field will cost: ``pairs``, the cell-candidate pairs within
+    the scanner's range, and the bytes of a visibility table holding them all (int32
+    candidate, cell and hits and a float32 range each), an upper bound on the table."""
 
     cells: int
     candidates: int
     pairs: int
-    dense_table_bytes: int
+    table_bytes: int
 
 
-def estimate(field: Field) -> Estimate:
-    pairs = field.n_cells * field.n_candidates
-    return Estimate(field.n_cells, field.n_candidates, pairs, 8 * pairs)
+def estimate(field: Field, reach: float) -> Estimate:
+    """The pairs within ``reach`` metres (the scanner's range), from up to 256
+    candidates spread over the field: each one's plots whose box comes within reach."""
+    n = field.n_candidates
+    rows = np.unique(np.linspace(0, n - 1, min(n, _SAMPLE)).round().astype(np.int64))
+    b, o = field.plot_boxes, field.cand_xy[rows]
+    gx = np.maximum(np.maximum(b[None, :, 0] - o[:, None, 0], 0.0), o[:, None, 0] - b[None, :, 3])
+    gy = np.maximum(np.maximum(b[None, :, 1] - o[:, None, 1], 0.0), o[:, None, 1] - b[None, :, 4])
+    near = gx * gx + gy * gy <= reach * reach
+    per = (near @ np.diff(field.cell_offset)).mean() if len(rows) else 0.0
+    pairs = int(np.rint(per * n))
+    return Estimate(field.n_cells, n, pairs, 16 * pairs)
 
 
-def check(field: Field, budget: PlanBudget) -> Estimate:
-    """The estimate of ``field``; raises :class:`OverBudget` when it exceeds ``budget``."""
-    e = estimate(field)
+def check(field: Field, budget: PlanBudget, reach: float = ScannerModel().max_range) -> Estimate:
+    """The estimate of ``field`` for a scanner reaching ``reach`` metres; raises
+    :class:`OverBudget` when it exceeds ``budget``."""
+    e = estimate(field, reach)
     if e.pairs > budget.max_cell_candidates:
         raise OverBudget(
-            f"field {field.name!r}: {e.cells:,} cells x {e.candidates:,} candidates = "
-            f"{e.pairs:.2g} cell-candidate pairs (a dense visibility table of "
-            f"{e.dense_table_bytes / 2**30:.1f} GiB), more than the planner's budget of "
-            f"{budget.max_cell_candidates:.2g} ([services.planner.budget] max_cell_candidates)"
+            f"field {field.name!r}: {e.cells:,} cells, {e.candidates:,} candidates, about "
+            f"{e.pairs:.2g} cell-candidate pairs within the scanner's {reach:g} m (a "
+            f"visibility table of up to {e.table_bytes / 2**30:.1f} GiB), more than the "
+            f"planner's budget of {budget.max_cell_candidates:.2g} ([services.planner.budget] "
+            "max_cell_candidates)"
         )
     return e
 

@@ -119,7 +119,7 @@ def plan_from_survey(
     if not path.is_file():
         raise CropModelError(f"{path}: no crop model; run `phenorover traits {run_dir}` first")
     model = cropmodel.read(path, fld)
-    check(fld, PlanBudget())
+    check(fld, PlanBudget(), req.scanner.max_range)
     nominal = plan(layout, req.scanner, req.options, field=fld, progress=progress)
     measured = plan_measured(layout, fld, model, req.scanner, req.options, progress)
     return nominal, measured

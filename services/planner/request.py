@@ -76,7 +76,7 @@ def compute(
     """Plan ``req``. Raises FieldError (OverBudget when the field is larger than
     ``budget``, default :class:`PlanBudget`) or ValueError, each one line."""
     layout, fld = resolve_field(req, allowed)
-    check(fld, budget or PlanBudget())
+    check(fld, budget or PlanBudget(), req.scanner.max_range)
     return plan(layout, req.scanner, req.options, field=fld, progress=progress)
 
 

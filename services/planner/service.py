@@ -52,7 +52,7 @@ class PlannerService:
     def handle(self, req: PlanRequest) -> PlanResult:
         try:  # fail fast, in this process, on a bad, forbidden or too large field
             _, fld = resolve_field(req, self.allowed)
-            check(fld, self.cfg.budget)
+            check(fld, self.cfg.budget, req.scanner.max_range)
         except FieldError as exc:
             raise RequestError(str(exc)) from None
         key = request_key(req)

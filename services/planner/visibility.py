@@ -29,6 +29,8 @@ import scipy.sparse as sp
 from common.field import Field, ScannerModel
 from services.planner.exact import exact_kernel
 from services.planner.faces import exposed_faces
+from services.planner.lattice import lattice_of
+from services.planner.lattice import translate as translate_pairs
 from services.planner.raycast import GridArgs, Table, build_grid, cell_of, first_hit, record
 
 log = logging.getLogger(__name__)
@@ -38,6 +40,7 @@ I64 = npt.NDArray[np.int64]
 I32 = npt.NDArray[np.int32]
 F32 = npt.NDArray[np.float32]
 Progress = Callable[[int, int], None]
+Pairs = tuple[I32, I32, I32, F32]  # candidate, cell, hits, nearest range
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -173,74 +176,109 @@ def compute_visibility(
     cull_sides: bool = True,
     step_deg: float | None = None,
     progress: Progress | None = None,
+    translate: bool = True,
 ) -> Visibility:
     """Visibility table of every candidate of ``field``.
 
     ``mode`` is ``"exact"`` (``samples`` x ``samples`` points per exposed cell face) or
     ``"grid"`` (``step_deg``, default the scanner's step). ``cull_sides`` skips plot
     sides that one box provably hides (same result, faster; off only to check that).
-    ``progress(done, total)`` is called after each chunk of candidates. Raises
-    ValueError on a bad mode or sampling.
+    ``translate``: a regular field's table from one candidate's (:mod:`.lattice`;
+    off only to check that). ``progress(done, total)`` is called after each chunk of
+    candidates. Raises ValueError on a bad mode or sampling.
     """
     if mode not in ("exact", "grid"):
         raise ValueError(f"visibility mode {mode!r}: expected 'exact' or 'grid'")
     if samples < 1:
         raise ValueError(f"samples={samples}: expected >= 1")
-    g = build_grid(field.plot_boxes)
-    n, nc = field.n_candidates, field.n_cells
-    origins = np.column_stack([field.cand_xy, np.full(n, scanner.height)])
-    if mode == "grid":
-        dirs = grid_directions(scanner, step_deg)
+    n, t0 = field.n_candidates, time.perf_counter()
+    lat = lattice_of(field, scanner.max_range) if translate else None
+    cast = _Caster(field, scanner, mode, samples, cull_sides, step_deg)
+    if lat is None:
+        cand, cell, hits, near = _cast_all(cast, n, mode, progress)
     else:
-        faces, fint, side_start = exposed_faces(field)
-        # planar occlusion (see services.planner.exact) holds when every plot stands on the ground
-        # and reaches the optical centre
-        cull = bool(np.all(g.boxes[:, 2] <= 0.0) and np.all(g.boxes[:, 5] >= scanner.height))
-        cull = cull and cull_sides
-    hspan = scanner.horizontal_end_deg - scanner.horizontal_start_deg
-    out_c: list[I32] = []
-    out_k: list[I32] = []
-    out_h: list[I32] = []
-    out_r: list[F32] = []
-    rays = 0
+        _, one, h1, r1 = cast(np.array([lat.template]))
+        cand, cell, hits, near = translate_pairs(field, lat, one, h1, r1, progress)
+        log.info(
+            "visibility (%s): a regular field, candidate %d's %d pairs moved to every "
+            "candidate, %.1f s", mode, lat.template, len(one), time.perf_counter() - t0,
+        )  # fmt: skip
+    return Visibility(cand, cell, hits, near, n, field.n_cells, cast.rays, mode)
+
+
+def _cast_all(cast: _Caster, n: int, mode: str, progress: Progress | None) -> Pairs:
+    """Every candidate's pairs, cast ``CHUNK`` candidates at a time."""
+    parts: list[Pairs] = []
     t0 = last_log = time.perf_counter()
-    scratch = _Scratch(field, scanner.max_range)
     for s in range(0, n, CHUNK):
         e = min(n, s + CHUNK)
-        o = np.ascontiguousarray(origins[s:e])
-        table, starts, owner = scratch.table(o, field.cell_dims)
-        if mode == "grid":
-            _grid_kernel(o, dirs, scanner.min_range, scanner.max_range, g.args, table)
-            rays += len(o) * len(dirs)
-        else:
-            limits = (
-                scanner.min_range,
-                scanner.max_range,
-                scanner.vertical_start_deg,
-                scanner.vertical_end_deg,
-                scanner.horizontal_start_deg,
-                hspan,
-            )
-            nr = exact_kernel(o, limits, samples, cull, faces, fint, side_start, g.args, table)
-            rays += int(nr.sum())
-        ci, ki, hits, near = scratch.pairs(table, starts, owner)
-        out_c.append((ci + s).astype(np.int32))
-        out_k.append(ki.astype(np.int32))
-        out_h.append(hits.copy())
-        out_r.append(near.copy())
+        parts.append(cast(np.arange(s, e)))
         now = time.perf_counter()
         if now - last_log > 2.0 or e == n:
             log.info("visibility (%s): %d/%d candidates, %.1f s", mode, e, n, now - t0)
             last_log = now
         if progress is not None:
             progress(e, n)
-    return Visibility(
-        cand=np.concatenate(out_c),
-        cell=np.concatenate(out_k),
-        hits=np.concatenate(out_h),
-        range_min=np.concatenate(out_r),
-        n_candidates=n,
-        n_cells=nc,
-        rays=rays,
-        mode=mode,
-    )
+    if not parts:
+        return (
+            np.zeros(0, np.int32),
+            np.zeros(0, np.int32),
+            np.zeros(0, np.int32),
+            np.zeros(0, np.float32),
+        )
+    cand, cell, hits, near = (np.concatenate([p[i] for p in parts]) for i in range(4))
+    return cand, cell, hits, near
+
+
+class _Caster:
+    """Casts the rays of chosen candidates (rows of ``cand_xy``) and keeps count of
+    them: ``caster(rows)`` gives their pairs (cand, cell, hits, nearest range)."""
+
+    def __init__(
+        self,
+        field: Field,
+        scanner: ScannerModel,
+        mode: str,
+        samples: int,
+        cull_sides: bool,
+        step_deg: float | None,
+    ) -> None:
+        self.field, self.scanner, self.mode, self.samples = field, scanner, mode, samples
+        self.grid = build_grid(field.plot_boxes)
+        self.rays = 0
+        if mode == "grid":
+            self.dirs = grid_directions(scanner, step_deg)
+        else:
+            self.faces = exposed_faces(field)
+            # planar occlusion (see services.planner.exact) holds when every plot
+            # stands on the ground and reaches the optical centre
+            b = self.grid.boxes
+            self.cull = bool(np.all(b[:, 2] <= 0.0) and np.all(b[:, 5] >= scanner.height))
+            self.cull = self.cull and cull_sides
+        self.scratch = _Scratch(field, scanner.max_range)
+
+    def __call__(self, rows: I64) -> Pairs:
+        sc, g = self.scanner, self.grid
+        o = np.column_stack([self.field.cand_xy[rows], np.full(len(rows), sc.height)])
+        o = np.ascontiguousarray(o)
+        table, starts, owner = self.scratch.table(o, self.field.cell_dims)
+        if self.mode == "grid":
+            _grid_kernel(o, self.dirs, sc.min_range, sc.max_range, g.args, table)
+            self.rays += len(o) * len(self.dirs)
+        else:
+            hspan = sc.horizontal_end_deg - sc.horizontal_start_deg
+            limits = (
+                sc.min_range,
+                sc.max_range,
+                sc.vertical_start_deg,
+                sc.vertical_end_deg,
+                sc.horizontal_start_deg,
+                hspan,
+            )
+            faces, fint, side_start = self.faces
+            nr = exact_kernel(
+                o, limits, self.samples, self.cull, faces, fint, side_start, g.args, table
+            )
+            self.rays += int(nr.sum())
+        ci, ki, hits, near = self.scratch.pairs(table, starts, owner)
+        return rows[ci].astype(np.int32), ki.astype(np.int32), hits.copy(), near.copy()

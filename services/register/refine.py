@@ -42,9 +42,9 @@ import small_gicp
 from scipy.spatial import cKDTree
 
 from common.poses import F64, apply, inv
+from common.workers import starmap
 from services.register.graph import PairResult, TargetObservation, optimise_graph
 from services.register.poses import difference
-from common.workers import starmap
 
 log = logging.getLogger(__name__)
 Pos = Annotated[float, msgspec.Meta(gt=0)]
