@@ -76,7 +76,10 @@ class CoverSummary(msgspec.Struct, frozen=True, kw_only=True):
 class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
     """The closed tour ``order`` (ids, starting and ending at 0) under ``nav``;
     ``nn_length`` is the nearest-neighbour baseline under the same distances and
-    ``length_by_nav`` the optimal length under each distance model when cheap to get."""
+    ``length_by_nav`` the optimal length under each distance model when cheap to get.
+    ``bound``: a lower bound on the shortest tour when the tour is not proven optimal
+    (Held-Karp's 1-tree bound), so ``length / bound - 1`` bounds how far from the
+    optimum it is."""
 
     nav: str
     order: list[int]
@@ -87,6 +90,7 @@ class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
     nn_order: list[int]
     length_by_nav: dict[str, NonNegative]
     time_s: NonNegative
+    bound: NonNegative | None = None
 
 
 class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):

@@ -86,6 +86,14 @@ def summary(r: PlanResult) -> str:
         ("order", "-".join("Origin" if i == 0 else str(i) for i in t.order)),
         ("legs", f"{len(r.legs)} straight legs"),
     ]
+    if t.bound is not None and t.bound > 0:
+        rows.append(
+            (
+                "tour bound",
+                f"{t.bound:.1f} m (Held-Karp 1-tree): the tour is within "
+                f"{t.length / t.bound - 1:.1%} of the shortest",
+            )
+        )
     if t.length_by_nav:
         rows.append(
             (

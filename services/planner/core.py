@@ -21,7 +21,13 @@ from common.messages.plan import (
 )
 from services.planner.cover import Cover, exact_cover, greedy_cover
 from services.planner.route import NAV_MODES, Navigator
-from services.planner.tsp import HELD_KARP_MAX, held_karp, nearest_neighbour, solve_tour
+from services.planner.tsp import (
+    HELD_KARP_MAX,
+    held_karp,
+    nearest_neighbour,
+    one_tree_bound,
+    solve_tour,
+)
 from services.planner.visibility import Progress, compute_visibility
 from services.planner.waypoints import tour_legs
 
@@ -115,6 +121,8 @@ def plan(
     ids: list[int | None] = [None, *(int(fld.cand_ids[j]) for j in sel)]
     dist = nav.distances(pts)
     tour = solve_tour(dist, opt.tour, opt.tour_time_limit_s)
+    # how far from the optimum a tour not proven optimal can be
+    bound = None if tour.status == "optimal" else one_tree_bound(dist, tour.length)
     nn = nearest_neighbour(dist)
     by_nav: dict[str, float] = {}
     if len(pts) <= HELD_KARP_MAX:
@@ -161,6 +169,7 @@ def plan(
             nn_order=as_ids(nn.order),
             length_by_nav=by_nav,
             time_s=timings["tour"],
+            bound=bound,
         ),
         legs=legs,
         timings=timings,

@@ -16,6 +16,7 @@ import dataclasses
 import logging
 import time
 
+import numba as nb
 import numpy as np
 import numpy.typing as npt
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
@@ -192,6 +193,83 @@ def guided_local_search(d: F64, time_limit_s: float = 10.0) -> Tour:
     return Tour(
         order, tour_length(d, order), "guided-local-search", "heuristic", time.perf_counter() - t0
     )
+
+
+def one_tree_bound(d: F64, upper: float, iterations: int = 1000) -> float:
+    """A lower bound on the shortest closed tour over ``d``: Held and Karp's 1-tree
+    bound (1970, Operations Research 18:1138), the node penalties raised by
+    subgradient steps towards the tour length ``upper`` (Held, Wolfe & Crowder 1974,
+    Mathematical Programming 6:62). Every tour is a 1-tree (a spanning tree of the
+    nodes but 0, and two edges at 0) with every degree 2, so the cheapest 1-tree under
+    any penalties, less twice their sum, is at most the shortest tour. An asymmetric
+    ``d`` is bounded by its cheaper direction per pair."""
+    d = _check(d)
+    n = d.shape[0]
+    if n <= 3:
+        return tour_length(d, list(range(n)))
+    return float(_held_karp_bound(np.minimum(d, d.T), float(upper), iterations))
+
+
+@nb.njit(cache=True)
+def _held_karp_bound(w0: F64, upper: float, iterations: int) -> float:  # pragma: no cover
+    n = w0.shape[0]
+    pi = np.zeros(n)
+    best, lam, since = -np.inf, 2.0, 0
+    deg = np.zeros(n, dtype=np.int64)
+    key = np.empty(n)
+    parent = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    for _ in range(iterations):
+        # Prim's minimum spanning tree of nodes 1..n-1 under the penalised weights
+        deg[:] = 0
+        key[:] = np.inf
+        done[:] = False
+        key[1] = 0.0
+        parent[1] = -1
+        length = 0.0
+        for _k in range(n - 1):
+            u, ku = -1, np.inf
+            for v in range(1, n):
+                if not done[v] and key[v] < ku:
+                    u, ku = v, key[v]
+            done[u] = True
+            if parent[u] >= 0:
+                length += ku
+                deg[u] += 1
+                deg[parent[u]] += 1
+            for v in range(1, n):
+                if not done[v]:
+                    wv = w0[u, v] + pi[u] + pi[v]
+                    if wv < key[v]:
+                        key[v], parent[v] = wv, u
+        # node 0's two cheapest edges
+        a, b, wa, wb = -1, -1, np.inf, np.inf
+        for v in range(1, n):
+            wv = w0[0, v] + pi[0] + pi[v]
+            if wv < wa:
+                b, wb, a, wa = a, wa, v, wv
+            elif wv < wb:
+                b, wb = v, wv
+        length += wa + wb
+        deg[0] = 2
+        deg[a] += 1
+        deg[b] += 1
+        bound = length - 2.0 * pi.sum()
+        if bound > best + 1e-9:
+            best, since = bound, 0
+        else:
+            since += 1
+            if since >= 30:  # no progress: smaller steps
+                lam, since = lam / 2.0, 0
+        norm = 0.0
+        for v in range(n):
+            norm += (deg[v] - 2.0) ** 2
+        if norm == 0.0 or lam < 1e-6:  # a 1-tree that is a tour is the optimum
+            break
+        step = lam * max(upper - bound, 1e-9) / norm
+        for v in range(n):
+            pi[v] += step * (deg[v] - 2.0)
+    return best
 
 
 def solve_tour(d: F64, method: str = "auto", time_limit_s: float = 10.0) -> Tour:

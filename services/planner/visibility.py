@@ -46,7 +46,8 @@ Pairs = tuple[I32, I32, I32, F32]  # candidate, cell, hits, nearest range
 @dataclasses.dataclass(frozen=True, eq=False)
 class Visibility:
     """Sparse visibility table. ``cand`` indexes ``Field.cand_xy`` (not the ids); 32-bit,
-    as a field of thousands of plots has tens of millions of pairs."""
+    as a field of thousands of plots has tens of millions of pairs. The pairs come by
+    candidate, then by cell, as :func:`compute_visibility` gives them."""
 
     cand: I32
     cell: I32
@@ -60,20 +61,31 @@ class Visibility:
     def matrix(self, min_hits: int = 1) -> sp.csr_matrix:
         """(candidates x cells) boolean CSR of pairs seen by at least ``min_hits``."""
         keep = self.hits >= min_hits
-        data = np.ones(int(keep.sum()), dtype=bool)
+        # sorted by candidate and cell: the CSR arrays directly, no COO sort
+        cand, cell = self.cand[keep], self.cell[keep]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(cand, minlength=self.n_candidates))])
+        data = np.ones(len(cell), dtype=bool)
         shape = (self.n_candidates, self.n_cells)
-        return sp.csr_matrix((data, (self.cand[keep], self.cell[keep])), shape=shape)
+        return sp.csr_matrix((data, cell, indptr), shape=shape)
 
     def cell_min_range(self) -> F64:
         """Nearest range at which each cell is seen (inf where never)."""
-        out = np.full(self.n_cells, np.inf)
-        np.minimum.at(out, self.cell, self.range_min)
-        return out
+        return _min_by_cell(self.cell, self.range_min, self.n_cells)
 
     def cell_views(self, min_hits: int = 1) -> I64:
         """Number of candidates that see each cell."""
         keep = self.hits >= min_hits
         return np.bincount(self.cell[keep], minlength=self.n_cells).astype(np.int64)
+
+
+@nb.njit(cache=True)
+def _min_by_cell(cell: I32, rng: F32, n: int) -> F64:  # pragma: no cover - compiled
+    # np.minimum.at does this in 2.7 s for a 100 x 100-plot field's 36 M pairs
+    out = np.full(n, np.inf)
+    for k in range(len(cell)):
+        if rng[k] < out[cell[k]]:
+            out[cell[k]] = rng[k]
+    return out
 
 
 def grid_directions(scanner: ScannerModel, step_deg: float | None = None) -> F64:

@@ -15,6 +15,7 @@ from services.planner.tsp import (
     guided_local_search,
     held_karp,
     nearest_neighbour,
+    one_tree_bound,
     solve_tour,
     tour_length,
 )
@@ -78,6 +79,23 @@ def test_held_karp_and_cpsat_are_optimal_on_random_instances():
         cp = circuit_cpsat(d, 10)
         assert cp.status == "optimal" and cp.length == pytest.approx(best, abs=1e-2)
         assert held_karp(d).order[0] == 0
+
+
+def test_the_one_tree_bound_is_below_every_tour_and_tight_on_small_ones():
+    rng = np.random.default_rng(4)
+    for n in (5, 9, 13):
+        xy = rng.uniform(0, 50, (n, 2))
+        d = br_distance(xy, xy)
+        best = held_karp(d).length
+        bound = one_tree_bound(d, 1.1 * best)
+        assert bound <= best + 1e-6 and bound >= 0.97 * best
+    xy = rng.uniform(0, 200, (120, 2))
+    d = br_distance(xy, xy)
+    gls = guided_local_search(d, 1.0)
+    assert 0.9 * gls.length < one_tree_bound(d, gls.length) <= gls.length
+    # asymmetric: bounded by the cheaper direction of each pair
+    skew = d + np.triu(np.full_like(d, 5.0), 1)
+    assert one_tree_bound(skew, 2 * gls.length) <= one_tree_bound(d, gls.length) + 1e-6
 
 
 def test_large_tours_beat_nearest_neighbour():
