@@ -14,6 +14,7 @@ from common.config import ConfigError
 from common.field import FieldError
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.robot import load_robot, scanner_model
+from services.planner.cluster import ClusterError
 from services.planner.outputs import write_all
 from services.planner.request import request_from_source
 
@@ -38,6 +39,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         metavar="RUN_DIR",
         help="plan on the crop a survey measured (RUN_DIR/crop.json); compares with nominal",
+    )
+    p.add_argument(
+        "--cluster",
+        default=None,
+        metavar="ADDRESS",
+        help="cast the visibility on a Dask scheduler's workers (tcp://HOST:8786; docs/scale.md)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="cast the visibility on a local Dask cluster of N worker processes",
     )
     p.add_argument("--manifest", type=Path, default=None)
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
@@ -118,9 +132,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
     )
     try:
         scanner = scanner_model(load_robot(args.robot))
-        req = request_from_source(args.field, scanner, opts, inline=args.remote)
+        dask = bool(args.cluster or args.workers)
+        # a Dask worker or a remote planner builds the field from the request alone
+        req = request_from_source(args.field, scanner, opts, inline=args.remote or dask)
     except (FieldError, ConfigError) as exc:
         print(f"phenorover plan: {exc}", file=sys.stderr)
+        return 2
+    if dask and (args.remote or args.from_survey is not None):
+        print("phenorover plan: --cluster and --workers plan one field here", file=sys.stderr)
         return 2
     if args.from_survey is not None:
         return _from_survey(args, req)
@@ -143,15 +162,25 @@ def cmd_plan(args: argparse.Namespace) -> int:
             finally:
                 bus.close()
     else:
-        from services.planner.request import compute
-
         try:
-            result = compute(req, progress=ProgressBar("visibility"))
-        except (FieldError, ValueError) as exc:
+            result = _plan_here(args, req)
+        except (FieldError, ValueError, ClusterError) as exc:
             print(f"phenorover plan: {exc}", file=sys.stderr)
             return 2
     print(summary(result))
     return _write(args, result)
+
+
+def _plan_here(args: argparse.Namespace, req: PlanRequest) -> PlanResult:
+    """Plan on this machine, the visibility on a Dask cluster when asked."""
+    from services.planner.request import compute
+
+    if not (args.cluster or args.workers):
+        return compute(req, progress=ProgressBar("visibility"))
+    from services.planner.cluster import DaskChunks
+
+    with DaskChunks(req, args.cluster, args.workers) as chunks:
+        return compute(req, progress=ProgressBar("visibility"), chunks=chunks)
 
 
 def _from_survey(args: argparse.Namespace, req: PlanRequest) -> int:

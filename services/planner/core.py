@@ -28,7 +28,7 @@ from services.planner.tsp import (
     one_tree_bound,
     solve_tour,
 )
-from services.planner.visibility import Progress, compute_visibility
+from services.planner.visibility import Chunks, Progress, compute_visibility
 from services.planner.waypoints import tour_legs
 
 log = logging.getLogger(__name__)
@@ -58,11 +58,13 @@ def plan(
     field: Field | None = None,
     progress: Progress | None = None,
     targets: npt.NDArray[np.bool_] | None = None,
+    chunks: Chunks | None = None,
 ) -> PlanResult:
     """Plan a survey of ``layout`` (or of ``field`` when given, e.g. one loaded from
     GeoJSON). ``progress(done, total)`` follows the visibility stage. ``targets``: a
     flag per cell of the field, the cells to cover (None: all; e.g. no gaps in a
-    measured crop); the others still occlude. Raises ValueError on inconsistent
+    measured crop); the others still occlude. ``chunks``: where the visibility's chunks
+    are cast (:func:`.visibility.compute_visibility`). Raises ValueError on inconsistent
     options (such as a lane index outside the field)."""
     scanner = scanner or ScannerModel()
     opt = options or PlanOptions()
@@ -82,6 +84,7 @@ def plan(
         samples=opt.samples,
         step_deg=opt.grid_step_deg,
         progress=progress,
+        chunks=chunks,
     )
     timings["visibility"] = time.perf_counter() - t
     every = vis.matrix(opt.min_hits)

@@ -20,7 +20,7 @@ from common.field import (
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from services.planner.budget import PlanBudget, check
 from services.planner.core import plan
-from services.planner.visibility import Progress
+from services.planner.visibility import Chunks, Progress
 
 
 def confine(name: str, allowed: Sequence[Path]) -> Path:
@@ -72,12 +72,14 @@ def compute(
     progress: Progress | None = None,
     budget: PlanBudget | None = None,
     allowed: Sequence[Path] | None = None,
+    chunks: Chunks | None = None,
 ) -> PlanResult:
     """Plan ``req``. Raises FieldError (OverBudget when the field is larger than
-    ``budget``, default :class:`PlanBudget`) or ValueError, each one line."""
+    ``budget``, default :class:`PlanBudget`) or ValueError, each one line.
+    ``chunks``: where the visibility's chunks are cast (:mod:`.cluster`)."""
     layout, fld = resolve_field(req, allowed)
     check(fld, budget or PlanBudget(), req.scanner.max_range)
-    return plan(layout, req.scanner, req.options, field=fld, progress=progress)
+    return plan(layout, req.scanner, req.options, field=fld, progress=progress, chunks=chunks)
 
 
 def request_from_source(

@@ -19,7 +19,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -41,6 +42,10 @@ I32 = npt.NDArray[np.int32]
 F32 = npt.NDArray[np.float32]
 Progress = Callable[[int, int], None]
 Pairs = tuple[I32, I32, I32, F32]  # candidate, cell, hits, nearest range
+# casts chunks (first, last + 1) of candidates with the options (mode, samples,
+# cull_sides, step_deg) somewhere: (last + 1, (pairs, rays)) of each, in order
+Cast = tuple[Pairs, int]  # a chunk's pairs and the rays cast for them
+Chunks = Callable[[list[tuple[int, int]], tuple[Any, ...]], Iterator[tuple[int, Cast]]]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -189,6 +194,7 @@ def compute_visibility(
     step_deg: float | None = None,
     progress: Progress | None = None,
     translate: bool = True,
+    chunks: Chunks | None = None,
 ) -> Visibility:
     """Visibility table of every candidate of ``field``.
 
@@ -196,8 +202,10 @@ def compute_visibility(
     ``"grid"`` (``step_deg``, default the scanner's step). ``cull_sides`` skips plot
     sides that one box provably hides (same result, faster; off only to check that).
     ``translate``: a regular field's table from one candidate's (:mod:`.lattice`;
-    off only to check that). ``progress(done, total)`` is called after each chunk of
-    candidates. Raises ValueError on a bad mode or sampling.
+    off only to check that). ``chunks``: where a field cast candidate by candidate has
+    its chunks cast (:class:`.cluster.DaskChunks`; default: here). ``progress(done,
+    total)`` is called after each chunk of candidates. Raises ValueError on a bad mode
+    or sampling.
     """
     if mode not in ("exact", "grid"):
         raise ValueError(f"visibility mode {mode!r}: expected 'exact' or 'grid'")
@@ -205,44 +213,57 @@ def compute_visibility(
         raise ValueError(f"samples={samples}: expected >= 1")
     n, t0 = field.n_candidates, time.perf_counter()
     lat = lattice_of(field, scanner.max_range) if translate else None
-    cast = _Caster(field, scanner, mode, samples, cull_sides, step_deg)
+    cast = Caster(field, scanner, mode, samples, cull_sides, step_deg)
     if lat is None:
-        cand, cell, hits, near = _cast_all(cast, n, mode, progress)
+        ranges = [(s, min(n, s + CHUNK)) for s in range(0, n, CHUNK)]
+        if chunks is None:
+            parts: Iterator[tuple[int, Cast]] = ((e, cast_chunk(cast, s, e)) for s, e in ranges)
+        else:
+            parts = chunks(ranges, (mode, samples, cull_sides, step_deg))
+        (cand, cell, hits, near), rays = _gather(parts, n, mode, progress)
     else:
         _, one, h1, r1 = cast(np.array([lat.template]))
+        rays = cast.rays
         cand, cell, hits, near = translate_pairs(field, lat, one, h1, r1, progress)
         log.info(
             "visibility (%s): a regular field, candidate %d's %d pairs moved to every "
             "candidate, %.1f s", mode, lat.template, len(one), time.perf_counter() - t0,
         )  # fmt: skip
-    return Visibility(cand, cell, hits, near, n, field.n_cells, cast.rays, mode)
+    return Visibility(cand, cell, hits, near, n, field.n_cells, rays, mode)
 
 
-def _cast_all(cast: _Caster, n: int, mode: str, progress: Progress | None) -> Pairs:
-    """Every candidate's pairs, cast ``CHUNK`` candidates at a time."""
-    parts: list[Pairs] = []
+def cast_chunk(cast: Caster, s: int, e: int) -> Cast:
+    """The pairs of candidates ``s`` to ``e`` (rows of ``cand_xy``), and the rays cast."""
+    before = cast.rays
+    pairs = cast(np.arange(s, e))
+    return pairs, cast.rays - before
+
+
+def _gather(
+    parts: Iterator[tuple[int, Cast]], n: int, mode: str, progress: Progress | None
+) -> Cast:
+    """The chunks' pairs, in order, into one table, and the rays cast; ``parts``
+    yields (candidates done, (pairs, rays)) chunk by chunk."""
+    got: list[Pairs] = []
+    rays = 0
     t0 = last_log = time.perf_counter()
-    for s in range(0, n, CHUNK):
-        e = min(n, s + CHUNK)
-        parts.append(cast(np.arange(s, e)))
+    for e, (part, r) in parts:
+        got.append(part)
+        rays += r
         now = time.perf_counter()
         if now - last_log > 2.0 or e == n:
             log.info("visibility (%s): %d/%d candidates, %.1f s", mode, e, n, now - t0)
             last_log = now
         if progress is not None:
             progress(e, n)
-    if not parts:
-        return (
-            np.zeros(0, np.int32),
-            np.zeros(0, np.int32),
-            np.zeros(0, np.int32),
-            np.zeros(0, np.float32),
-        )
-    cand, cell, hits, near = (np.concatenate([p[i] for p in parts]) for i in range(4))
-    return cand, cell, hits, near
+    if not got:
+        zeros = np.zeros(0, np.int32)
+        return (zeros, zeros, zeros, np.zeros(0, np.float32)), rays
+    cand, cell, hits, near = (np.concatenate([p[i] for p in got]) for i in range(4))
+    return (cand, cell, hits, near), rays
 
 
-class _Caster:
+class Caster:
     """Casts the rays of chosen candidates (rows of ``cand_xy``) and keeps count of
     them: ``caster(rows)`` gives their pairs (cand, cell, hits, nearest range)."""
 

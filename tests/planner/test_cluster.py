@@ -1,0 +1,85 @@
+"""The visibility's chunks on a Dask cluster (a LocalCluster of two worker
+processes): the same plan as the local run, byte for byte but for the timings; a
+worker killed mid-plan changes nothing; an unreachable scheduler is one line."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Iterator
+from typing import Any
+
+import msgspec
+import numpy as np
+import pytest
+
+from common.field import FieldLayout, ScannerModel
+from common.messages.plan import PlanOptions, PlanRequest, PlanResult
+from phenorover.cli import main
+from services.planner.cluster import ClusterError, DaskChunks
+from services.planner.request import compute, resolve_field
+from services.planner.visibility import Cast, compute_visibility
+
+pytest.importorskip("distributed")
+
+
+def _untimed(r: PlanResult) -> bytes:
+    """The plan without the seconds each stage took."""
+    raw = msgspec.to_builtins(r)
+    raw["timings"] = {}
+    for part in ("visibility", "cover", "tour"):
+        raw[part]["time_s"] = 0.0
+    return msgspec.json.encode(raw)
+
+
+def _field_request(rows: int, plots: int) -> PlanRequest:
+    raw = dict(name="small", rows=rows, plots_per_row=plots, plot_length=3.0, plot_width=1.0)
+    raw |= dict(plot_height=1.9, row_spacing=0.8, alley_width=1.5, headland_width=2.25)
+    layout = msgspec.convert(raw | {"edge_width": 1.4}, FieldLayout)
+    return PlanRequest(layout=layout, scanner=ScannerModel(), options=PlanOptions())
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[DaskChunks]:
+    # a field too small to be moved from one candidate (lattice): cast chunk by chunk
+    with DaskChunks(_field_request(8, 12), workers=2) as dc:
+        yield dc
+
+
+def test_a_plan_on_the_cluster_is_the_local_plan(cluster: DaskChunks) -> None:
+    req = msgspec.msgpack.decode(cluster._req, type=PlanRequest)
+    here = compute(req)
+    there = compute(req, chunks=cluster)
+    assert _untimed(there) == _untimed(here)
+    assert there.visibility.rays == here.visibility.rays > 0
+
+
+def test_a_worker_killed_mid_plan_changes_nothing(cluster: DaskChunks) -> None:
+    req = msgspec.msgpack.decode(cluster._req, type=PlanRequest)
+    _, field = resolve_field(req)
+    pids = list(cluster.client.run(os.getpid).values())
+
+    def killing(
+        ranges: list[tuple[int, int]], options: tuple[Any, ...]
+    ) -> Iterator[tuple[int, Cast]]:
+        it = cluster(ranges, options)
+        yield next(it)
+        os.kill(pids[0], signal.SIGKILL)  # its chunks run again on the other
+        yield from it
+
+    # other options than the first test's: none of its results is kept by the cluster
+    here = compute_visibility(field, ScannerModel(), samples=2)
+    there = compute_visibility(field, ScannerModel(), samples=2, chunks=killing)
+    assert len(here.cand) > 0
+    for name in ("cand", "cell", "hits", "range_min"):
+        assert np.array_equal(getattr(here, name), getattr(there, name)), name
+
+
+def test_an_unreachable_scheduler_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(
+        ClusterError, match=r"cannot reach the Dask scheduler at tcp://127\.0\.0\.1"
+    ):
+        DaskChunks(_field_request(2, 2), address="tcp://127.0.0.1:9", timeout_s=1.0)
+    assert main(["plan", "engr", "--cluster", "tcp://127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot reach the Dask scheduler" in err[0], err
