@@ -10,11 +10,11 @@ import time
 from pathlib import Path
 from typing import TextIO
 
+from common.cluster import ClusterError, add_cluster_arguments, cluster_of
 from common.config import ConfigError
 from common.field import FieldError
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.robot import load_robot, scanner_model
-from services.planner.cluster import ClusterError
 from services.planner.outputs import write_all
 from services.planner.request import request_from_source
 
@@ -40,19 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="RUN_DIR",
         help="plan on the crop a survey measured (RUN_DIR/crop.json); compares with nominal",
     )
-    p.add_argument(
-        "--cluster",
-        default=None,
-        metavar="ADDRESS",
-        help="cast the visibility on a Dask scheduler's workers (tcp://HOST:8786; docs/scale.md)",
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=0,
-        metavar="N",
-        help="cast the visibility on a local Dask cluster of N worker processes",
-    )
+    add_cluster_arguments(p, "the visibility")
     p.add_argument("--manifest", type=Path, default=None)
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
     p.add_argument("--timeout", type=float, default=300.0)
@@ -173,13 +161,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def _plan_here(args: argparse.Namespace, req: PlanRequest) -> PlanResult:
     """Plan on this machine, the visibility on a Dask cluster when asked."""
+    from services.planner.cluster import DaskChunks
     from services.planner.request import compute
 
-    if not (args.cluster or args.workers):
-        return compute(req, progress=ProgressBar("visibility"))
-    from services.planner.cluster import DaskChunks
-
-    with DaskChunks(req, args.cluster, args.workers) as chunks:
+    with cluster_of(args) as cluster:
+        chunks = None if cluster is None else DaskChunks(req, cluster)
         return compute(req, progress=ProgressBar("visibility"), chunks=chunks)
 
 

@@ -33,6 +33,7 @@ from typing import Any
 
 import msgspec
 
+from common.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_of
 from common.config import dump_toml
 from common.files import atomic_write, finite
 from common.robot import RUN_COPY, load_robot
@@ -56,6 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="where to look for scan files missing at their recorded path (repeatable)",
     )
     add_config_arguments(p)
+    add_cluster_arguments(p, "the scan pairs' alignments")
     p.add_argument(
         "--robot",
         default=None,
@@ -126,9 +128,11 @@ def run_register(
     scan_dirs: list[Path] | None = None,
     cfg: RegisterRunConfig | None = None,
     robot: str | Path | None = None,
+    cluster: Cluster | None = None,
 ) -> Registration:
     """Register one run folder and write its outputs; raises RunError or ValueError
-    (ConfigError for a bad robot description). ``robot``: see ``--robot``."""
+    (ConfigError for a bad robot description). ``robot``: see ``--robot``;
+    ``cluster``: where the scan pairs are aligned (default: here)."""
     cfg = cfg or RegisterRunConfig()
     run = load_run(run_dir)
     if robot is None:
@@ -144,7 +148,12 @@ def run_register(
         rcfg = msgspec.structs.replace(
             rcfg, refine=msgspec.structs.replace(rcfg.refine, nav_sigma_z=1.0)
         )
-    reg = register(inputs, rcfg)
+    pairs_by = None
+    if cluster is not None:
+        from services.register.cluster import DaskPairs
+
+        pairs_by = DaskPairs([s.path for s in inputs], rcfg.refine, cluster)
+    reg = register(inputs, rcfg, pairs_by)
     write_outputs(run, reg, cfg, out or run_dir)
     return reg
 
@@ -153,8 +162,9 @@ def cmd_register(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     try:
         cfg, _ = resolve(args)
-        run_register(args.run_dir, args.out, args.scans, cfg, args.robot)
-    except (RunError, ValueError, OSError) as exc:
+        with cluster_of(args) as cluster:
+            run_register(args.run_dir, args.out, args.scans, cfg, args.robot, cluster)
+    except (RunError, ValueError, OSError, ClusterError) as exc:
         print(f"phenorover register: {exc}", file=sys.stderr)
         return 2
     print(

@@ -36,6 +36,7 @@ from services.register.metrics import (
     target_stats,
 )
 from services.register.refine import (
+    PairsBy,
     RefineConfig,
     prepare,
     prior_sigmas,
@@ -157,9 +158,12 @@ def _as_list(m: F64) -> Pose:
     return [[float(v) for v in row] for row in m]
 
 
-def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Registration:
+def register(
+    scans: list[ScanInput], cfg: RegisterConfig | None = None, pairs_by: PairsBy | None = None
+) -> Registration:
     """Register ``scans`` (see the module docstring). Raises ValueError (naming the
-    file) for an unreadable scan or a bad pose."""
+    file) for an unreadable scan or a bad pose. ``pairs_by``: where the pairs are
+    aligned (:mod:`.cluster`; default: here)."""
     cfg = cfg or RegisterConfig()
     if not scans:
         raise ValueError("register: no scans given")
@@ -195,7 +199,7 @@ def register(scans: list[ScanInput], cfg: RegisterConfig | None = None) -> Regis
         for m, lab in enumerate(labels[i])
         if lab >= 0
     ]
-    c2c, pairs = refine(prepared, nav, cfg.refine, obs)
+    c2c, pairs = refine(prepared, nav, cfg.refine, obs, pairs_by)
     timings["c2c"] = time.perf_counter() - t
 
     t = time.perf_counter()

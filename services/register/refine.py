@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from collections.abc import Callable
 from typing import Annotated
 
 import msgspec
@@ -248,23 +249,30 @@ def prior_sigmas(cfg: RefineConfig) -> F64:
     return np.array([cfg.nav_sigma_xy, cfg.nav_sigma_xy, cfg.nav_sigma_z, tilt, tilt, yaw])
 
 
+# aligns the pairs (i, j, navigation pose of j in i's frame) somewhere: their
+# results in order (default: here, :func:`common.workers.starmap`)
+PairsBy = Callable[[list[tuple[int, int, F64]]], list[PairResult]]
+
+
 def refine(
     clouds: list[Prepared],
     nav: list[F64],
     cfg: RefineConfig,
     targets: list[TargetObservation] | None = None,
+    pairs_by: PairsBy | None = None,
 ) -> tuple[list[F64], list[PairResult]]:
     """Refined poses (4x4 field <- scanner) of all scans and the pair results; sphere
     ``targets`` seen by two or more scans join the pose graph when ``cfg.use_targets``.
     The pairs are aligned ``cfg.threads`` at a time, each in its own process
-    (:func:`.workers.starmap`)."""
+    (:func:`common.workers.starmap`), or by ``pairs_by`` (a Dask cluster)."""
     if len(clouds) != len(nav):
         raise ValueError(f"{len(clouds)} clouds but {len(nav)} navigation poses")
-    jobs = [
-        (i, j, clouds[i], clouds[j], inv(nav[i]) @ nav[j], cfg)
-        for i, j in select_pairs(nav, cfg.max_pair_distance)
-    ]
-    pairs = starmap(align_pair, jobs, cfg.threads)
+    todo = [(i, j, inv(nav[i]) @ nav[j]) for i, j in select_pairs(nav, cfg.max_pair_distance)]
+    if pairs_by is None:
+        jobs = [(i, j, clouds[i], clouds[j], rel, cfg) for i, j, rel in todo]
+        pairs = starmap(align_pair, jobs, cfg.threads)
+    else:
+        pairs = pairs_by(todo)
     for pr in pairs:
         log.info(
             "pair %d-%d: overlap %.2f rmse %.3f m %s",

@@ -13,10 +13,11 @@ import msgspec
 import numpy as np
 import pytest
 
+from common.cluster import Cluster, ClusterError
 from common.field import FieldLayout, ScannerModel
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from phenorover.cli import main
-from services.planner.cluster import ClusterError, DaskChunks
+from services.planner.cluster import DaskChunks
 from services.planner.request import compute, resolve_field
 from services.planner.visibility import Cast, compute_visibility
 
@@ -42,8 +43,8 @@ def _field_request(rows: int, plots: int) -> PlanRequest:
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[DaskChunks]:
     # a field too small to be moved from one candidate (lattice): cast chunk by chunk
-    with DaskChunks(_field_request(8, 12), workers=2) as dc:
-        yield dc
+    with Cluster(workers=2) as c:
+        yield DaskChunks(_field_request(8, 12), c)
 
 
 def test_a_plan_on_the_cluster_is_the_local_plan(cluster: DaskChunks) -> None:
@@ -57,7 +58,7 @@ def test_a_plan_on_the_cluster_is_the_local_plan(cluster: DaskChunks) -> None:
 def test_a_worker_killed_mid_plan_changes_nothing(cluster: DaskChunks) -> None:
     req = msgspec.msgpack.decode(cluster._req, type=PlanRequest)
     _, field = resolve_field(req)
-    pids = list(cluster.client.run(os.getpid).values())
+    pids = list(cluster.cluster.client.run(os.getpid).values())
 
     def killing(
         ranges: list[tuple[int, int]], options: tuple[Any, ...]
@@ -79,7 +80,7 @@ def test_an_unreachable_scheduler_is_one_line(capsys: pytest.CaptureFixture[str]
     with pytest.raises(
         ClusterError, match=r"cannot reach the Dask scheduler at tcp://127\.0\.0\.1"
     ):
-        DaskChunks(_field_request(2, 2), address="tcp://127.0.0.1:9", timeout_s=1.0)
+        Cluster("tcp://127.0.0.1:9", timeout_s=1.0)
     assert main(["plan", "engr", "--cluster", "tcp://127.0.0.1:9"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot reach the Dask scheduler" in err[0], err

@@ -6,6 +6,8 @@ on a tilted robot, plus noise)."""
 from __future__ import annotations
 
 import math
+import shutil
+import sqlite3
 from pathlib import Path
 
 import msgspec
@@ -93,4 +95,24 @@ def mission_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         )
     log.set_state("done")
     log.close()
+    return run
+
+
+def copy_run(src: Path, dst: Path) -> Path:
+    """The mission log and the scans (with their truth files) of ``src`` under ``dst``,
+    the log's scan paths pointing at the copies; no outputs of earlier registrations."""
+    card = dst / "card"
+    shutil.copytree(src.parent / "card", card)
+    run = dst / src.name
+    run.mkdir()
+    a, b = sqlite3.connect(src / "mission.db"), sqlite3.connect(run / "mission.db")
+    try:
+        a.backup(b)
+        rows = b.execute("SELECT idx, file FROM steps WHERE file IS NOT NULL").fetchall()
+        for idx, file in rows:
+            b.execute("UPDATE steps SET file = ? WHERE idx = ?", (str(card / Path(file).name), idx))
+        b.commit()
+    finally:
+        a.close()
+        b.close()
     return run

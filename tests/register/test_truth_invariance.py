@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import re
-import shutil
-import sqlite3
 from pathlib import Path
 from typing import Any
 
@@ -16,29 +14,10 @@ import numpy as np
 from common.pointcloud import read_e57
 from phenorover.eval.register.cli import evaluate
 from services.register.cli import main
+from tests.register.conftest import copy_run
 
 # what a registration measures about itself, different at every run
 TIMING = re.compile(rb"registered in [0-9.]+ s")
-
-
-def _copy_run(src: Path, dst: Path) -> Path:
-    """The mission log and the scans (with their truth files) of ``src`` under ``dst``,
-    the log's scan paths pointing at the copies; no outputs of earlier registrations."""
-    card = dst / "card"
-    shutil.copytree(src.parent / "card", card)
-    run = dst / src.name
-    run.mkdir()
-    a, b = sqlite3.connect(src / "mission.db"), sqlite3.connect(run / "mission.db")
-    try:
-        a.backup(b)
-        rows = b.execute("SELECT idx, file FROM steps WHERE file IS NOT NULL").fetchall()
-        for idx, file in rows:
-            b.execute("UPDATE steps SET file = ? WHERE idx = ?", (str(card / Path(file).name), idx))
-        b.commit()
-    finally:
-        a.close()
-        b.close()
-    return run
 
 
 def _without_timings(report: dict[str, Any]) -> dict[str, Any]:
@@ -51,7 +30,7 @@ def _without_timings(report: dict[str, Any]) -> dict[str, Any]:
 def test_outputs_are_the_same_with_and_without_truth_files(
     mission_dir: Path, tmp_path: Path
 ) -> None:
-    run = _copy_run(mission_dir, tmp_path)
+    run = copy_run(mission_dir, tmp_path)
     truths = sorted((tmp_path / "card").glob("*.truth.json"))
     assert truths, "the fixture's scans have no truth files"
     with_truth, without = tmp_path / "with", tmp_path / "without"
@@ -84,7 +63,7 @@ def test_outputs_are_the_same_with_and_without_truth_files(
 def test_the_evaluation_scores_the_outputs_against_the_truth(
     mission_dir: Path, tmp_path: Path
 ) -> None:
-    run = _copy_run(mission_dir, tmp_path)
+    run = copy_run(mission_dir, tmp_path)
     assert main([str(run), "--no-figures"]) == 0
     result, truth = evaluate(run)
     assert truth is not None and truth.scans == len(list((tmp_path / "card").glob("*.e57")))

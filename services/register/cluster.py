@@ -1,0 +1,63 @@
+"""The scan pairs' alignments on a Dask cluster (:mod:`common.cluster`).
+
+``phenorover register RUN_DIR --cluster tcp://HOST:8786`` (or ``--workers N``, a local
+cluster) sends each pair's GICP alignment to a worker as a pure task keyed by the two
+scan files, their navigation offset and the options. The task loads its own data: it
+reads the two scans from their files and downsamples them (once per scan and worker
+process), as the Dask maintainers advise over scattering large arrays; so the run's
+scans must be at the same path on every worker (a shared file system). One thread per
+task gives the same bits in any process (:mod:`common.workers`), and the results are
+gathered in the pairs' order: the registration is the local run's.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import logging
+from pathlib import Path
+
+import msgspec
+
+from common.cluster import Cluster
+from common.pointcloud import read_e57
+from common.poses import F64
+from services.register.graph import PairResult
+from services.register.refine import Prepared, RefineConfig, align_pair, prepare
+
+log = logging.getLogger(__name__)
+
+
+class DaskPairs:
+    """Aligns the pairs of the scans at ``paths`` on ``cluster`` (:data:`.refine.PairsBy`)."""
+
+    def __init__(self, paths: list[Path], cfg: RefineConfig, cluster: Cluster) -> None:
+        self.paths = [str(Path(p).resolve()) for p in paths]
+        self.cfg, self.cluster = cfg, cluster
+        raw = msgspec.msgpack.encode([self.paths, cfg])
+        self._key = hashlib.sha256(raw).hexdigest()[:16]
+
+    def __call__(self, todo: list[tuple[int, int, F64]]) -> list[PairResult]:
+        futures = [
+            self.cluster.client.submit(
+                _align, self.paths[i], self.paths[j], i, j, rel, self.cfg,
+                key=f"pair-{self._key}-{i}-{j}",
+            )
+            for i, j, rel in todo
+        ]  # fmt: skip
+        log.info("%d scan pairs sent to %s", len(futures), self.cluster.where)
+        return [r for _, r in self.cluster.in_order(futures)]
+
+
+def _align(a: str, b: str, i: int, j: int, rel: F64, cfg: RefineConfig) -> PairResult:
+    """On a worker: scan ``b`` aligned to scan ``a``."""
+    return align_pair(i, j, _prepared(a, cfg), _prepared(b, cfg), rel, cfg)
+
+
+@functools.lru_cache(maxsize=16)
+def _prepared(path: str, cfg: RefineConfig) -> Prepared:
+    """A scan read from its file and downsampled, once per worker process."""
+    first = read_e57(path)
+    if not first:
+        raise ValueError(f"{path}: E57 file holds no scan")
+    return prepare(first[0].points, cfg)
