@@ -26,8 +26,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
 
-from common.field import Field, FieldLayout, ScannerModel, build_field, load_field
+from common.field import Field, ScannerModel, build_field, load_field
 from common.messages.plan import PlanOptions
+from phenorover.eval.fields import engr_sized
 from phenorover.eval.results import Bench, Goal
 from phenorover.eval.tolerance import RADII, tolerance
 from services.planner.core import plan
@@ -270,18 +271,7 @@ def engr_section(out: dict[str, Any]) -> None:
 
 
 def big_section(out: dict[str, Any], tour_limit_s: float) -> None:
-    layout = FieldLayout(
-        name="big",
-        rows=40,
-        plots_per_row=50,
-        plot_length=3.0,
-        plot_width=1.0,
-        plot_height=1.9,
-        row_spacing=0.8,
-        alley_width=1.5,
-        headland_width=2.25,
-        edge_width=1.4,
-    )
+    layout = engr_sized(40, 50)
     field = build_field(layout)
     vis, dt = timed(compute_visibility, field, ScannerModel())
     print(

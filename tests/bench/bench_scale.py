@@ -31,24 +31,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
 
-from common.field import FieldLayout, ScannerModel, build_field
+from common.field import ScannerModel, build_field
 from common.messages.plan import PlanResult
+from phenorover.eval.fields import engr_sized
 from phenorover.eval.results import Bench, Goal
 from services.planner.visibility import compute_visibility
 
 ROWS = PLOTS = 100
-LAYOUT = FieldLayout(
-    name="plots-100x100",
-    rows=ROWS,
-    plots_per_row=PLOTS,
-    plot_length=3.0,
-    plot_width=1.0,
-    plot_height=1.9,
-    row_spacing=0.8,
-    alley_width=1.5,
-    headland_width=2.25,
-    edge_width=1.4,
-)
+LAYOUT = engr_sized(ROWS, PLOTS, "plots-100x100")
 TARGETS = {"plan_s": 30.0, "plan_gb": 2.0}
 GOALS = {
     "plan_s": Goal(

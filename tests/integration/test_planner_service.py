@@ -12,9 +12,10 @@ import pytest
 
 from common import keys
 from common.client import wait_alive
-from common.field import FieldLayout, load_field
+from common.field import load_field
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.transport import Bus, RpcError
+from phenorover.eval.fields import engr_sized
 from tests.conftest import REPO, Procs
 
 
@@ -114,18 +115,7 @@ def test_requests_after_the_warm_up_are_answered(planner: Bus) -> None:
     assert call(planner, PlanRequest(name="spl")).field == "spl"  # the warm-up's, cached
 
 
-BIG = FieldLayout(
-    name="big",
-    rows=140,
-    plots_per_row=140,
-    plot_length=3.0,
-    plot_width=1.0,
-    plot_height=1.9,
-    row_spacing=0.8,
-    alley_width=1.5,
-    headland_width=2.25,
-    edge_width=1.4,
-)
+BIG = engr_sized(140, 140)
 
 
 def test_a_field_beyond_the_budget_is_refused_and_the_planner_keeps_serving(

@@ -14,9 +14,10 @@ import numpy as np
 import pytest
 
 from common.cluster import Cluster, ClusterError
-from common.field import FieldLayout, ScannerModel
+from common.field import ScannerModel
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from phenorover.cli import main
+from phenorover.eval.fields import engr_sized
 from services.planner.cluster import DaskChunks
 from services.planner.request import compute, resolve_field
 from services.planner.visibility import Cast, compute_visibility
@@ -34,10 +35,9 @@ def _untimed(r: PlanResult) -> bytes:
 
 
 def _field_request(rows: int, plots: int) -> PlanRequest:
-    raw = dict(name="small", rows=rows, plots_per_row=plots, plot_length=3.0, plot_width=1.0)
-    raw |= dict(plot_height=1.9, row_spacing=0.8, alley_width=1.5, headland_width=2.25)
-    layout = msgspec.convert(raw | {"edge_width": 1.4}, FieldLayout)
-    return PlanRequest(layout=layout, scanner=ScannerModel(), options=PlanOptions())
+    return PlanRequest(
+        layout=engr_sized(rows, plots), scanner=ScannerModel(), options=PlanOptions()
+    )
 
 
 @pytest.fixture(scope="module")

@@ -6,20 +6,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import msgspec
 import numpy as np
 import pytest
 
-from common.field import FieldLayout, ScannerModel, build_field, load_field
+from common.field import ScannerModel, build_field, load_field
+from phenorover.eval.fields import engr_sized
 from services.planner.lattice import lattice_of
 from services.planner.visibility import compute_visibility
-
-
-def layout(rows: int, plots: int) -> FieldLayout:
-    raw = dict(name="f", rows=rows, plots_per_row=plots, plot_length=3.0, plot_width=1.0)
-    raw |= dict(plot_height=1.9, row_spacing=0.8, alley_width=1.5, headland_width=2.25)
-    return msgspec.convert(raw | {"edge_width": 1.4}, FieldLayout)
-
 
 # a short range, so that a small field holds a whole range inside it
 SHORT = ScannerModel(max_range=10.0)
@@ -27,7 +20,7 @@ SHORT = ScannerModel(max_range=10.0)
 
 @pytest.mark.parametrize("mode", ["exact", "grid"])
 def test_translated_table_is_the_cast_table(mode: str) -> None:
-    field = build_field(layout(20, 10))
+    field = build_field(engr_sized(20, 10))
     lat = lattice_of(field, SHORT.max_range)
     assert lat is not None
     moved = compute_visibility(field, SHORT, mode, step_deg=1.0)
@@ -40,7 +33,7 @@ def test_translated_table_is_the_cast_table(mode: str) -> None:
 
 
 def test_a_field_that_is_no_lattice_or_too_small_is_cast() -> None:
-    field = build_field(layout(20, 10))
+    field = build_field(engr_sized(20, 10))
     assert lattice_of(field, 70.0) is None  # no candidate has its range inside the field
     assert lattice_of(load_field("engr")[1], 70.0) is None
     # one plot a centimetre off its place

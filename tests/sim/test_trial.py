@@ -15,6 +15,7 @@ import pytest
 
 from common.field import Field, FieldLayout, build_field, load_field
 from common.field_model import PlotRecord
+from phenorover.eval.fields import engr_sized
 from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
 from services.sim.plant_truth import plant_truth, write_plant_truth
 from services.sim.targets import TargetConfig
@@ -46,19 +47,8 @@ def _layout(book: bool = True, planting: datetime.date | None = PLANTED) -> Fiel
         for r in range(1, REPS + 1)
         for c in range(1, ENTRIES + 1)
     )
-    return FieldLayout(
-        name="mini",
-        rows=REPS,
-        plots_per_row=ENTRIES,
-        plot_length=3.0,
-        plot_width=1.0,
-        plot_height=1.9,
-        row_spacing=0.8,
-        alley_width=1.5,
-        headland_width=2.25,
-        edge_width=1.4,
-        field_book=recs if book else (),
-        planting_date=planting,
+    return msgspec.structs.replace(
+        engr_sized(REPS, ENTRIES, "mini"), field_book=recs if book else (), planting_date=planting
     )
 
 
