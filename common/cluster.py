@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -69,6 +69,13 @@ class Cluster:
             while nxt in done:
                 yield nxt, done.pop(nxt)
                 nxt += 1
+
+    def map(self, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]]) -> list[Any]:
+        """``[fn(*job) for job in jobs]`` on the cluster, in the jobs' order (``fn``
+        importable by the workers; Dask keys each task by its function and
+        arguments)."""
+        futures = [self.client.submit(fn, *job) for job in jobs]
+        return [r for _, r in self.in_order(futures)]
 
     def close(self) -> None:
         if self.client is not None:

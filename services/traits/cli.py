@@ -28,6 +28,7 @@ import sys
 import time
 from pathlib import Path
 
+from common.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_of
 from services.traits.compute import NO_POINTS, OCCLUDED, OK, RunTraits, compute_traits, read_run
 from services.traits.config import TraitsConfig, add_config_arguments, resolve
 from services.traits.fits import Fits
@@ -55,6 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "trial's date in RUN_DIR/manifest.toml)",
     )
     add_config_arguments(p)
+    add_cluster_arguments(p, "a season's runs (one run is computed here)")
 
 
 def run_traits(
@@ -88,17 +90,21 @@ def _summary(rt: RunTraits, out: Path, seconds: float) -> str:
     )
 
 
-def run_season(runs: list[Path], cfg: TraitsConfig, out: Path | None) -> Path:
+def run_season(
+    runs: list[Path], cfg: TraitsConfig, out: Path | None, cluster: Cluster | None = None
+) -> Path:
     """A season of ``runs``, written into ``out`` (default: ``season-<field>`` beside
     the last run): the season's files, and each date's own in ``out/<run>``. Not into
     the runs' folders: a date's heights here stand on the season's first ground, so
-    they would change the run's own outputs with whichever season read it last."""
+    they would change the run's own outputs with whichever season read it last.
+    ``cluster``: where the runs are read and computed (a Dask cluster whose workers
+    see the run folders)."""
     from services.traits.season_outputs import write_season
     from services.traits.series import season
 
     t0 = time.monotonic()
     with Fits() as fits:
-        s = season(runs, cfg)
+        s = season(runs, cfg, None if cluster is None else cluster.map)
         dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
         entries = any(r.entry for r in s.runs[0].records)
         for rt in s.runs if entries else ():
@@ -122,12 +128,13 @@ def cmd_traits(args: argparse.Namespace) -> int:
         if len(runs) > 1:
             if args.date is not None:
                 raise RunError("--date names one survey's date: give it with one RUN_DIR")
-            run_season(runs, cfg, args.out)
+            with cluster_of(args) as cluster:
+                run_season(runs, cfg, args.out, cluster)
             return 0
         t0 = time.monotonic()
         rt, _ = run_traits(runs[0], cfg, args.out, args.date)
         print(_summary(rt, args.out or runs[0], time.monotonic() - t0), flush=True)
-    except (RunError, ValueError, OSError) as exc:
+    except (RunError, ValueError, OSError, ClusterError) as exc:
         print(f"phenorover traits: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2
     return 0

@@ -21,16 +21,19 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import itertools
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from services.traits.compute import OK, RunTraits, compute_traits, field_ground
+from services.traits.compute import OK, Found, RunTraits, compute_traits, field_ground
 from services.traits.config import TraitsConfig
+from services.traits.ground import GroundModel
 from services.traits.run import RunError, RunInput, load_run
 from services.traits.season import LogisticFit, Offset, fit_all, growth, vertical_offset
 
@@ -90,21 +93,48 @@ def _days(inputs: Sequence[RunInput]) -> F64:
     return np.array([(d - start).days for d in dates], dtype=np.float64)
 
 
-def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig) -> Season:
-    """Read and compute the traits of every run as one season; raises RunError."""
-    inputs = _dated([load_run(r) for r in run_dirs])
-    _same_field(inputs)
-    found = [field_ground(inp, cfg) for inp in inputs]
-    ref = found[0][1]
+def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig, by: Map | None = None) -> Season:
+    """Read and compute the traits of every run as one season; raises RunError.
+    ``by``: where each run is read and computed (:meth:`common.cluster.Cluster.map`,
+    a Dask cluster, when the run folders are on a file system its workers share;
+    default: here), in three passes: each run read and checked against the others,
+    its ground, then its traits on the season's ground. The same season either way."""
+    by = by or _here
+    try:
+        # the runs checked against each other before any ground is looked for
+        inputs = _dated(by(_input, [(str(r),) for r in run_dirs]))
+        _same_field(inputs)
+        grounds = by(_ground, [(str(inp.run_dir), cfg) for inp in inputs])
+        offsets, corrected = _offsets(inputs, grounds, cfg)
+        ref = grounds[0]
+        jobs: list[tuple[Any, ...]] = [(str(inputs[0].run_dir), cfg, None, None)]
+        for inp, off in zip(inputs[1:], offsets[1:], strict=True):
+            assert off is not None
+            jobs.append((str(inp.run_dir), cfg, ref, off if off.exceeds else None))
+        runs = by(_traits, jobs)
+    finally:
+        _read.cache_clear()
+        _found.cache_clear()
+    days = _days(inputs)
+    ok = np.array([[q == OK for q in r.table.quality] for r in runs])
+    height = np.where(ok, np.array([r.table.column("height") for r in runs]), np.nan)
+    fits = fit_all(days, height) if len(runs) >= 3 else []
+    return Season(runs, days, offsets, corrected, height, growth(height, days), fits)
+
+
+def _offsets(
+    inputs: list[RunInput], grounds: list[GroundModel], cfg: TraitsConfig
+) -> tuple[list[Offset | None], list[bool]]:
+    """Each date's ground against the first's on stable ground (None for the first),
+    and whether it exceeds the tolerance."""
+    ref = grounds[0]
     boxes = inputs[0].field.plot_boxes
     stable_ref = ref.stable_mask(boxes, cfg.stable_margin)
     gx, gy = ref.centres()
     cx, cy = np.meshgrid(gx, gy)  # (ny, nx), as the ground grids
     offsets: list[Offset | None] = [None]
     corrected = [False]
-    runs = [compute_traits(inputs[0], cfg, found[0])]
-    for inp, f in zip(inputs[1:], found[1:], strict=True):
-        g = f[1]
+    for inp, g in zip(inputs[1:], grounds[1:], strict=True):
         try:
             off = vertical_offset(
                 ref.z,
@@ -124,10 +154,41 @@ def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig) -> Season:
             inp.date, off.median_m * 1000, inputs[0].date, off.n_cells,
             plane[1] * 1000, plane[2] * 1000, ", corrected" if off.exceeds else "",
         )  # fmt: skip
-        shift = off if off.exceeds else None
-        runs.append(compute_traits(inp, cfg, f, heights_from=ref, offset=shift))
-    days = _days(inputs)
-    ok = np.array([[q == OK for q in r.table.quality] for r in runs])
-    height = np.where(ok, np.array([r.table.column("height") for r in runs]), np.nan)
-    fits = fit_all(days, height) if len(runs) >= 3 else []
-    return Season(runs, days, offsets, corrected, height, growth(height, days), fits)
+    return offsets, corrected
+
+
+# runs fn(*job) for every job, the results in the jobs' order
+Map = Callable[[Callable[..., Any], Sequence[tuple[Any, ...]]], list[Any]]
+
+
+def _here(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]]) -> list[Any]:
+    return [fn(*job) for job in jobs]
+
+
+def _input(run_dir: str) -> RunInput:
+    """A run's input without its cloud: what the season checks."""
+    return dataclasses.replace(_read(run_dir), cloud=np.zeros((0, 3)), source=None)
+
+
+def _ground(run_dir: str, cfg: TraitsConfig) -> GroundModel:
+    return _found(run_dir, cfg)[1]
+
+
+def _traits(
+    run_dir: str, cfg: TraitsConfig, ref: GroundModel | None, offset: Offset | None
+) -> RunTraits:
+    """A run's traits, heights above ``ref`` moved by ``offset`` (None: its own)."""
+    return compute_traits(
+        _read(run_dir), cfg, _found(run_dir, cfg), heights_from=ref, offset=offset
+    )
+
+
+# once per process for a season's passes (a Dask worker may get another run's next)
+@functools.lru_cache(maxsize=16)
+def _read(run_dir: str) -> RunInput:
+    return load_run(run_dir)
+
+
+@functools.lru_cache(maxsize=16)
+def _found(run_dir: str, cfg: TraitsConfig) -> Found:
+    return field_ground(_read(run_dir), cfg)

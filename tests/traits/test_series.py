@@ -104,3 +104,17 @@ def test_two_runs_of_one_date_are_refused(
     assert main([str(runs[0]), str(runs[0])]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "both surveys of" in err[0]
+
+
+def test_a_season_on_a_dask_cluster_is_the_season_computed_here(
+    runs: list[Path], tmp_path: Path
+) -> None:
+    pytest.importorskip("distributed")
+    here, there = tmp_path / "here", tmp_path / "there"
+    args = [*map(str, runs), "--no-figures", "--log-level", "warning"]
+    assert main([*args, "--out", str(here)]) == 0
+    assert main([*args, "--out", str(there), "--workers", "2"]) == 0
+    files = sorted(p.relative_to(here) for p in here.rglob("*") if p.is_file())
+    assert files and files == sorted(p.relative_to(there) for p in there.rglob("*") if p.is_file())
+    for f in files:
+        assert (here / f).read_bytes() == (there / f).read_bytes(), f
