@@ -28,6 +28,7 @@ import msgspec
 import numpy as np
 
 from common.field import Field, FieldError, ScannerModel
+from services.planner.raycast import in_range
 
 DEFAULT_MAX_CELL_CANDIDATES = 2_000_000_000
 _SAMPLE = 256  # candidates the estimate looks at
@@ -63,10 +64,7 @@ def estimate(field: Field, reach: float) -> Estimate:
     candidates spread over the field: each one's plots whose box comes within reach."""
     n = field.n_candidates
     rows = np.unique(np.linspace(0, n - 1, min(n, _SAMPLE)).round().astype(np.int64))
-    b, o = field.plot_boxes, field.cand_xy[rows]
-    gx = np.maximum(np.maximum(b[None, :, 0] - o[:, None, 0], 0.0), o[:, None, 0] - b[None, :, 3])
-    gy = np.maximum(np.maximum(b[None, :, 1] - o[:, None, 1], 0.0), o[:, None, 1] - b[None, :, 4])
-    near = gx * gx + gy * gy <= reach * reach
+    near = in_range(field.cand_xy[rows], field.plot_boxes, reach)
     per = (near @ np.diff(field.cell_offset)).mean() if len(rows) else 0.0
     pairs = int(np.rint(per * n))
     return Estimate(field.n_cells, n, pairs, 16 * pairs)

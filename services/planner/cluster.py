@@ -26,7 +26,7 @@ import msgspec
 
 from common.cluster import Cluster
 from common.messages.plan import PlanRequest
-from services.planner.visibility import Cast, Caster, cast_chunk
+from services.planner.caster import Cast, Caster, cast_chunk
 
 log = logging.getLogger(__name__)
 

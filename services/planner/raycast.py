@@ -101,6 +101,15 @@ def build_grid(boxes: F64) -> BoxGrid:
     )
 
 
+def in_range(o: F64, boxes: F64, reach: float) -> npt.NDArray[np.bool_]:
+    """(k, P): whether the nearest point of each box ``[xmin, ymin, zmin, xmax, ymax,
+    zmax]`` lies within ``reach`` of each origin ``o`` (k, d), d = 2 (plan view) or 3."""
+    d = o.shape[1]
+    lo, hi = boxes[None, :, :d], boxes[None, :, 3 : 3 + d]
+    gap = np.maximum(np.maximum(lo - o[:, None, :], 0.0), o[:, None, :] - hi)
+    return (gap * gap).sum(axis=2) <= reach * reach
+
+
 @nb.njit(inline="always", cache=True, error_model="numpy")
 def _slab(lo: float, hi: float, o: float, inv: float, d: float) -> tuple[float, float]:
     # Treat |d| < _PAR as parallel: 1/d would overflow and 0 * inf give NaN; over any

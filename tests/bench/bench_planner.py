@@ -31,11 +31,12 @@ from common.messages.plan import PlanOptions
 from phenorover.eval.fields import engr_sized
 from phenorover.eval.results import Bench, Goal
 from phenorover.eval.tolerance import RADII, tolerance
+from services.planner.caster import grid_directions
 from services.planner.core import plan
 from services.planner.cover import exact_cover, greedy_cover
 from services.planner.route import Navigator
 from services.planner.tsp import guided_local_search, nearest_neighbour
-from services.planner.visibility import compute_visibility, grid_directions
+from services.planner.visibility import compute_visibility
 
 TARGETS = {
     "engr_grid_s": 1.0,

@@ -18,9 +18,10 @@ from common.field import ScannerModel
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from phenorover.cli import main
 from phenorover.eval.fields import engr_sized
+from services.planner.caster import Cast
 from services.planner.cluster import DaskChunks
 from services.planner.request import compute, resolve_field
-from services.planner.visibility import Cast, compute_visibility
+from services.planner.visibility import compute_visibility
 
 pytest.importorskip("distributed")
 
