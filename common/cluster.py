@@ -12,7 +12,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 log = logging.getLogger(__name__)
@@ -23,11 +25,19 @@ class ClusterError(RuntimeError):
 
 
 class Cluster:
-    """A client of the scheduler at ``address`` (waited for ``timeout_s``), else of a
-    local cluster of ``workers`` processes; raises :class:`ClusterError`. A context
-    manager: leaving it closes the client, and the local cluster it started."""
+    """A client of the scheduler at ``address`` (waited for ``timeout_s``, and for a
+    worker as long), else of a local cluster of ``workers`` processes; raises
+    :class:`ClusterError`. A task's result is waited for ``task_timeout_s`` at most
+    (a cluster that lost every worker). A context manager: leaving it closes the
+    client, and the local cluster it started."""
 
-    def __init__(self, address: str | None = None, workers: int = 0, timeout_s: float = 10.0):
+    def __init__(
+        self,
+        address: str | None = None,
+        workers: int = 0,
+        timeout_s: float = 10.0,
+        task_timeout_s: float = 3600.0,
+    ) -> None:
         from distributed import Client, LocalCluster
 
         # the scheduler's and client's INFO lines (connections opened and closed) say
@@ -35,47 +45,58 @@ class Cluster:
         logging.getLogger("distributed").setLevel(logging.WARNING)
         self._local: Any = None
         self.client: Any = None
+        self.task_timeout_s = task_timeout_s
+        where = address or "a local cluster"
         try:
             if address:
                 self.client = Client(address, timeout=f"{timeout_s}s")
                 self.where = address
             else:
                 n = max(1, workers)
+                # on loopback only, its status page on a free port (two commands at
+                # once would both want 8787)
                 self._local = LocalCluster(
                     n_workers=n,
                     threads_per_worker=1,
                     processes=True,
-                    dashboard_address=None,
+                    host="127.0.0.1",
+                    dashboard_address="127.0.0.1:0",
                     silence_logs=logging.WARNING,
                 )
                 self.client = Client(self._local)
                 self.where = f"a local cluster of {n} worker processes"
+            self.client.wait_for_workers(1, timeout=timeout_s)
         except (OSError, TimeoutError) as exc:
             self.close()
-            where = address or "a local cluster"
             raise ClusterError(f"cannot reach the Dask scheduler at {where}: {exc}") from None
 
-    def in_order(self, futures: Sequence[Any]) -> Iterator[tuple[int, Any]]:
-        """(index, result) of ``futures`` in their order, each as soon as it and all
-        before it are done; a task's exception is raised here."""
-        from distributed import as_completed
-
-        index = {f.key: k for k, f in enumerate(futures)}
-        done: dict[int, Any] = {}
-        nxt = 0
-        for fut in as_completed(futures):
-            done[index[fut.key]] = fut.result()
-            fut.release()
-            while nxt in done:
-                yield nxt, done.pop(nxt)
-                nxt += 1
+    def imap(self, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        """``fn(*job)`` of every job on the cluster, yielded in the jobs' order (``fn``
+        importable by the workers; Dask keys each task by its function and
+        arguments); a task's exception is raised here."""
+        futures = [self.client.submit(fn, *job) for job in jobs]
+        log.info("%d tasks of %s sent to %s", len(futures), fn.__name__, self.where)
+        try:
+            for f in futures:
+                try:
+                    yield f.result(timeout=self.task_timeout_s)
+                except TimeoutError:
+                    raise ClusterError(
+                        f"{self.where}: no result from a task in {self.task_timeout_s:g} s "
+                        "(no worker left?)"
+                    ) from None
+                f.release()
+        finally:
+            for f in futures:
+                f.release()
 
     def map(self, fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]]) -> list[Any]:
-        """``[fn(*job) for job in jobs]`` on the cluster, in the jobs' order (``fn``
-        importable by the workers; Dask keys each task by its function and
-        arguments)."""
-        futures = [self.client.submit(fn, *job) for job in jobs]
-        return [r for _, r in self.in_order(futures)]
+        """The results of :meth:`imap`, as a list."""
+        return list(self.imap(fn, jobs))
+
+    def everywhere(self, fn: Callable[[], object]) -> None:
+        """Run ``fn()`` in every worker process (e.g. to drop what it cached)."""
+        self.client.run(fn)
 
     def close(self) -> None:
         if self.client is not None:
@@ -88,6 +109,20 @@ class Cluster:
 
     def __exit__(self, *_: object) -> None:
         self.close()
+
+
+def file_stamp(*paths: str | Path) -> tuple[tuple[str, int, int], ...]:
+    """Each file's path, size and modification time (0, 0 when missing): what a worker's
+    cache of what it read is keyed by, so that a long-running worker never serves a
+    file as it was before it changed."""
+    out = []
+    for p in paths:
+        try:
+            st = os.stat(p)
+            out.append((str(p), st.st_size, st.st_mtime_ns))
+        except OSError:
+            out.append((str(p), 0, 0))
+    return tuple(out)
 
 
 def add_cluster_arguments(p: argparse.ArgumentParser, what: str) -> None:

@@ -17,7 +17,6 @@ A regular field's table is one candidate's, moved to the others
 from __future__ import annotations
 
 import functools
-import hashlib
 import logging
 from collections.abc import Iterator
 from typing import Any
@@ -38,23 +37,15 @@ class DaskChunks:
     def __init__(self, req: PlanRequest, cluster: Cluster) -> None:
         self.cluster = cluster
         self._req = msgspec.msgpack.encode(req)
-        self._key = hashlib.sha256(self._req).hexdigest()[:16]
 
     def __call__(
         self, ranges: list[tuple[int, int]], options: tuple[Any, ...]
     ) -> Iterator[tuple[int, Cast]]:
         """``(end, (pairs, rays))`` of each range in order, ``options`` the
-        :class:`.visibility.Caster`'s after the field and scanner."""
-        opt = hashlib.sha256(repr(options).encode()).hexdigest()[:8]
-        futures = [
-            self.cluster.client.submit(
-                _chunk, self._req, s, e, options, key=f"visibility-{self._key}-{opt}-{s}-{e}"
-            )
-            for s, e in ranges
-        ]
-        log.info("visibility: %d chunks sent to %s", len(futures), self.cluster.where)
-        for k, cast in self.cluster.in_order(futures):
-            yield ranges[k][1], cast
+        :class:`.caster.Caster`'s after the field and scanner."""
+        jobs = [(self._req, s, e, options) for s, e in ranges]
+        for (_, e), cast in zip(ranges, self.cluster.imap(_chunk, jobs), strict=True):
+            yield e, cast
 
 
 def _chunk(req: bytes, s: int, e: int, options: tuple[Any, ...]) -> Cast:

@@ -13,13 +13,10 @@ gathered in the pairs' order: the registration is the local run's.
 from __future__ import annotations
 
 import functools
-import hashlib
 import logging
 from pathlib import Path
 
-import msgspec
-
-from common.cluster import Cluster
+from common.cluster import Cluster, file_stamp
 from common.pointcloud import read_e57
 from common.poses import F64
 from services.register.graph import PairResult
@@ -34,29 +31,27 @@ class DaskPairs:
     def __init__(self, paths: list[Path], cfg: RefineConfig, cluster: Cluster) -> None:
         self.paths = [str(Path(p).resolve()) for p in paths]
         self.cfg, self.cluster = cfg, cluster
-        raw = msgspec.msgpack.encode([self.paths, cfg])
-        self._key = hashlib.sha256(raw).hexdigest()[:16]
 
     def __call__(self, todo: list[tuple[int, int, F64]]) -> list[PairResult]:
-        futures = [
-            self.cluster.client.submit(
-                _align, self.paths[i], self.paths[j], i, j, rel, self.cfg,
-                key=f"pair-{self._key}-{i}-{j}",
-            )
-            for i, j, rel in todo
-        ]  # fmt: skip
-        log.info("%d scan pairs sent to %s", len(futures), self.cluster.where)
-        return [r for _, r in self.cluster.in_order(futures)]
+        stamps = [file_stamp(p) for p in self.paths]
+        jobs = [(stamps[i], stamps[j], i, j, rel, self.cfg) for i, j, rel in todo]
+        out: list[PairResult] = self.cluster.map(_align, jobs)
+        return out
 
 
-def _align(a: str, b: str, i: int, j: int, rel: F64, cfg: RefineConfig) -> PairResult:
-    """On a worker: scan ``b`` aligned to scan ``a``."""
+Stamp = tuple[tuple[str, int, int], ...]
+
+
+def _align(a: Stamp, b: Stamp, i: int, j: int, rel: F64, cfg: RefineConfig) -> PairResult:
+    """On a worker: scan ``b`` aligned to scan ``a`` (each its file's stamp)."""
     return align_pair(i, j, _prepared(a, cfg), _prepared(b, cfg), rel, cfg)
 
 
 @functools.lru_cache(maxsize=16)
-def _prepared(path: str, cfg: RefineConfig) -> Prepared:
-    """A scan read from its file and downsampled, once per worker process."""
+def _prepared(stamp: Stamp, cfg: RefineConfig) -> Prepared:
+    """A scan read from its file and downsampled, once per worker process and version
+    of the file."""
+    path = stamp[0][0]
     first = read_e57(path)
     if not first:
         raise ValueError(f"{path}: E57 file holds no scan")

@@ -100,11 +100,15 @@ def run_season(
     ``cluster``: where the runs are read and computed (a Dask cluster whose workers
     see the run folders)."""
     from services.traits.season_outputs import write_season
-    from services.traits.series import season
+    from services.traits.series import forget, season
 
     t0 = time.monotonic()
     with Fits() as fits:
-        s = season(runs, cfg, None if cluster is None else cluster.map)
+        try:
+            s = season(runs, cfg, None if cluster is None else cluster.map)
+        finally:
+            if cluster is not None:
+                cluster.everywhere(forget)
         dest = out or s.runs[-1].run_dir.parent / f"season-{s.runs[0].layout.name}"
         entries = any(r.entry for r in s.runs[0].records)
         for rt in s.runs if entries else ():

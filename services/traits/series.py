@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from common.cluster import file_stamp
 from services.traits.compute import OK, Found, RunTraits, compute_traits, field_ground
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundModel
@@ -102,19 +103,18 @@ def season(run_dirs: Sequence[str | Path], cfg: TraitsConfig, by: Map | None = N
     by = by or _here
     try:
         # the runs checked against each other before any ground is looked for
-        inputs = _dated(by(_input, [(str(r),) for r in run_dirs]))
+        inputs = _dated(by(_input, [_run(r) for r in run_dirs]))
         _same_field(inputs)
-        grounds = by(_ground, [(str(inp.run_dir), cfg) for inp in inputs])
+        grounds = by(_ground, [(*_run(inp.run_dir), cfg) for inp in inputs])
         offsets, corrected = _offsets(inputs, grounds, cfg)
         ref = grounds[0]
-        jobs: list[tuple[Any, ...]] = [(str(inputs[0].run_dir), cfg, None, None)]
+        jobs: list[tuple[Any, ...]] = [(*_run(inputs[0].run_dir), cfg, None, None)]
         for inp, off in zip(inputs[1:], offsets[1:], strict=True):
             assert off is not None
-            jobs.append((str(inp.run_dir), cfg, ref, off if off.exceeds else None))
+            jobs.append((*_run(inp.run_dir), cfg, ref, off if off.exceeds else None))
         runs = by(_traits, jobs)
     finally:
-        _read.cache_clear()
-        _found.cache_clear()
+        forget()
     days = _days(inputs)
     ok = np.array([[q == OK for q in r.table.quality] for r in runs])
     height = np.where(ok, np.array([r.table.column("height") for r in runs]), np.nan)
@@ -165,30 +165,45 @@ def _here(fn: Callable[..., Any], jobs: Sequence[tuple[Any, ...]]) -> list[Any]:
     return [fn(*job) for job in jobs]
 
 
-def _input(run_dir: str) -> RunInput:
+# a run as a season's tasks name it: its folder, and the stamp of the files read from
+# it, so that a long-running worker's cache never serves a run as it was before
+Stamp = tuple[tuple[str, int, int], ...]
+
+
+def _run(run_dir: str | Path) -> tuple[str, Stamp]:
+    d = Path(run_dir)
+    return str(d), file_stamp(d / "registered.laz", d / "registered.e57", d / "mission.db")
+
+
+def _input(run_dir: str, stamp: Stamp) -> RunInput:
     """A run's input without its cloud: what the season checks."""
-    return dataclasses.replace(_read(run_dir), cloud=np.zeros((0, 3)), source=None)
+    return dataclasses.replace(_read(run_dir, stamp), cloud=np.zeros((0, 3)), source=None)
 
 
-def _ground(run_dir: str, cfg: TraitsConfig) -> GroundModel:
-    return _found(run_dir, cfg)[1]
+def _ground(run_dir: str, stamp: Stamp, cfg: TraitsConfig) -> GroundModel:
+    return _found(run_dir, stamp, cfg)[1]
 
 
 def _traits(
-    run_dir: str, cfg: TraitsConfig, ref: GroundModel | None, offset: Offset | None
+    run_dir: str, stamp: Stamp, cfg: TraitsConfig, ref: GroundModel | None, offset: Offset | None
 ) -> RunTraits:
     """A run's traits, heights above ``ref`` moved by ``offset`` (None: its own)."""
-    return compute_traits(
-        _read(run_dir), cfg, _found(run_dir, cfg), heights_from=ref, offset=offset
-    )
+    inp, found = _read(run_dir, stamp), _found(run_dir, stamp, cfg)
+    return compute_traits(inp, cfg, found, heights_from=ref, offset=offset)
 
 
 # once per process for a season's passes (a Dask worker may get another run's next)
 @functools.lru_cache(maxsize=16)
-def _read(run_dir: str) -> RunInput:
+def _read(run_dir: str, stamp: Stamp) -> RunInput:
     return load_run(run_dir)
 
 
 @functools.lru_cache(maxsize=16)
-def _found(run_dir: str, cfg: TraitsConfig) -> Found:
-    return field_ground(_read(run_dir), cfg)
+def _found(run_dir: str, stamp: Stamp, cfg: TraitsConfig) -> Found:
+    return field_ground(_read(run_dir, stamp), cfg)
+
+
+def forget() -> None:
+    """Drop the runs this process read for a season (a worker's, when it is done)."""
+    _read.cache_clear()
+    _found.cache_clear()

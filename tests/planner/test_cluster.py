@@ -41,24 +41,25 @@ def _field_request(rows: int, plots: int) -> PlanRequest:
     )
 
 
+# a field too small to be moved from one candidate (lattice): cast chunk by chunk
+REQ = _field_request(8, 12)
+
+
 @pytest.fixture(scope="module")
 def cluster() -> Iterator[DaskChunks]:
-    # a field too small to be moved from one candidate (lattice): cast chunk by chunk
     with Cluster(workers=2) as c:
-        yield DaskChunks(_field_request(8, 12), c)
+        yield DaskChunks(REQ, c)
 
 
 def test_a_plan_on_the_cluster_is_the_local_plan(cluster: DaskChunks) -> None:
-    req = msgspec.msgpack.decode(cluster._req, type=PlanRequest)
-    here = compute(req)
-    there = compute(req, chunks=cluster)
+    here = compute(REQ)
+    there = compute(REQ, chunks=cluster)
     assert _untimed(there) == _untimed(here)
     assert there.visibility.rays == here.visibility.rays > 0
 
 
 def test_a_worker_killed_mid_plan_changes_nothing(cluster: DaskChunks) -> None:
-    req = msgspec.msgpack.decode(cluster._req, type=PlanRequest)
-    _, field = resolve_field(req)
+    _, field = resolve_field(REQ)
     pids = list(cluster.cluster.client.run(os.getpid).values())
 
     def killing(
