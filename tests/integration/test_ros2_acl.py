@@ -105,15 +105,52 @@ def _odometry(t: dict[str, Any], k: int) -> dict[str, Any]:
     }
 
 
-def _sees_publisher(session: zenoh.Session, topic: str, ros_type: str) -> bool:
-    """Whether ``session`` discovers, from rmw_zenoh's liveliness tokens, a publisher
-    (``MP``) of ``topic`` (what a ROS 2 graph cache asks at start-up). Each side asks
-    for the *other* side's publisher: its own subscription's token would answer too."""
-    replies = session.liveliness().get(f"@ros2_lv/{BASE['ros2_domain']}/**", timeout=1.0)
+def _publisher_token(key: str, topic: str, ros_type: str) -> bool:
+    """Whether liveliness key ``key`` is rmw_zenoh's token of a publisher (``MP``) of
+    ``topic``. Each side asks for the *other* side's publisher: its own subscription's
+    token would answer too."""
     want = "/" + topic.replace("/", "%") + "/" + dds_type_name(ros_type) + "/"
+    return "/MP/" in key and want in key
+
+
+def _sees_publisher(session: zenoh.Session, topic: str, ros_type: str) -> bool:
+    """Whether ``session`` discovers a publisher of ``topic`` by rmw_zenoh's start-up
+    liveliness query."""
+    replies = session.liveliness().get(f"@ros2_lv/{BASE['ros2_domain']}/**", timeout=1.0)
     return any(
-        r.ok is not None and "/MP/" in (k := str(r.ok.key_expr)) and want in k for r in replies
+        r.ok is not None and _publisher_token(str(r.ok.key_expr), topic, ros_type) for r in replies
     )
+
+
+class _Publishers:
+    """The rmw_zenoh endpoint tokens ``session`` discovers, as a ROS 2 graph cache
+    does: a liveliness subscriber with history (the tokens alive already, then each
+    new one)."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self._session = session
+        self._keys: list[str] = []
+        self._cond = threading.Condition()
+
+    def _on(self, s: zenoh.Sample) -> None:
+        if s.kind == zenoh.SampleKind.PUT:
+            with self._cond:
+                self._keys.append(str(s.key_expr))
+                self._cond.notify_all()
+
+    def __enter__(self) -> _Publishers:
+        key = f"@ros2_lv/{BASE['ros2_domain']}/**"
+        self._sub = self._session.liveliness().declare_subscriber(key, self._on, history=True)
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._sub.undeclare()
+
+    def wait_for(self, topic: str, ros_type: str, timeout: float = 20.0) -> bool:
+        with self._cond:
+            return self._cond.wait_for(
+                lambda: any(_publisher_token(k, topic, ros_type) for k in self._keys), timeout
+            )
 
 
 @pytest.mark.parametrize(
@@ -192,22 +229,23 @@ def test_husky_driver_and_base_under_the_shipped_access_control(
             assert m.twist.angular.z == 0.2 and m.header.frame_id == "base_link"
             assert m.header.stamp.sec > 0  # diff_drive_controller would take 0 as "now"
 
-            # discovery, both ways (asked a few times: tokens may still be arriving)
-            def both() -> tuple[bool, bool]:
-                sdk_session = ZenohSession.get_instance().session
-                return (
-                    _sees_publisher(sdk_session, fq("cmd_vel"), "geometry_msgs/msg/TwistStamped"),
-                    _sees_publisher(robot, fq("platform/odom"), "nav_msgs/msg/Odometry"),
-                )
-
-            seen = both()
-            for _ in range(10):
-                if all(seen):
-                    break
-                seen = both()
+            # discovery, both ways: each side's graph cache as rmw_zenoh builds it (a
+            # liveliness subscriber with history), waited for on the tokens' arrival
+            sdk_session = ZenohSession.get_instance().session
+            ours = (fq("cmd_vel"), "geometry_msgs/msg/TwistStamped")
+            theirs = (fq("platform/odom"), "nav_msgs/msg/Odometry")
             if ros2_rule:
+                with (
+                    _Publishers(sdk_session) as driver_sees,
+                    _Publishers(robot) as we_see,
+                ):
+                    seen = (driver_sees.wait_for(*ours), we_see.wait_for(*theirs))
                 assert seen == (True, True), f"discovery (driver sees us, we see it): {seen}"
             else:
+                seen = (
+                    _sees_publisher(sdk_session, *ours),
+                    _sees_publisher(robot, *theirs),
+                )
                 assert seen == (False, False), f"discovery passed the router: {seen}"
         finally:
             stop.set()
