@@ -129,6 +129,7 @@ ROLES: dict[Role, Grants] = {
             keys.BASE_SCAN,
             keys.BASE_IMU,
             keys.BASE_STATUS,
+            keys.BASE_BATTERY,
             keys.NAV_POSE,
             keys.NAV_PROGRESS,
             keys.MISSION_STATE,
@@ -158,6 +159,7 @@ SIMULATION_ONLY = _keys(
     keys.SIM_ENCODERS,
     keys.SIM_LIDAR,
     keys.SIM_IMU,
+    keys.SIM_BATTERY,
     keys.SIM_RENDER,
     keys.SIM_RUN,
 )

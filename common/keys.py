@@ -79,6 +79,8 @@ SIM_WHEELS = Topic(_k("sim/device/wheels"), sim.SimWheelCommand, control=True)
 SIM_ENCODERS = Topic(_k("sim/device/encoders"), sim.SimEncoders)
 SIM_LIDAR = Topic(_k("sim/device/lidar"), base.LaserScan)
 SIM_IMU = Topic(_k("sim/device/imu"), base.Imu)
+# the simulated Husky's battery management (its true charge)
+SIM_BATTERY = Topic(_k("sim/device/battery"), base.BatteryState)
 SIM_RUN = Rpc[sim.SimRun, sim.SimClock](_k("rpc/sim/run"), sim.SimRun, sim.SimClock)
 SIM_RENDER = Rpc[sim.RenderRequest, sim.RenderReply](
     _k("rpc/sim/render"), sim.RenderRequest, sim.RenderReply
@@ -93,6 +95,7 @@ BASE_SCAN = Topic(_k("base/scan"), base.LaserScan)
 BASE_IMU = Topic(_k("base/imu"), base.Imu)
 BASE_ESTOP = Topic(_k("base/estop"), base.EStop, control=True)
 BASE_STATUS = Topic(_k("base/status"), base.BaseStatus)
+BASE_BATTERY = Topic(_k("base/battery"), base.BatteryState)
 
 NAV_POSE = Topic(_k("nav/pose"), nav.PoseEstimate)
 NAV_PROGRESS = Topic(_k("nav/progress"), nav.NavProgress)
@@ -128,6 +131,7 @@ ALL_TOPICS: tuple[Topic[Any], ...] = (
     SIM_ENCODERS,
     SIM_LIDAR,
     SIM_IMU,
+    SIM_BATTERY,
     GNSS_FIX,
     GNSS_HEADING,
     BASE_CMD_VEL,
@@ -136,6 +140,7 @@ ALL_TOPICS: tuple[Topic[Any], ...] = (
     BASE_IMU,
     BASE_ESTOP,
     BASE_STATUS,
+    BASE_BATTERY,
     NAV_POSE,
     NAV_PROGRESS,
     SCANNER_STATUS,

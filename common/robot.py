@@ -9,8 +9,9 @@ REP-103 signs for roll and pitch), radians through the ``*_rad`` properties.
 The manifest's ``robot`` names the file (:func:`robot_path`); ``common/robots/husky.toml``
 is the paper's Clearpath Husky A200 and the default. gnss (compass), nav (antenna
 levers, lidar, footprint, limits), base (limits), sim (antenna truth, scanner, lidar,
-wheels, limits), register (scanner and antenna levers), viz (body, lidar, scanner)
-and the mission (the scanner height it plans with) read it; none keeps a copy.
+wheels, limits, battery), register (scanner and antenna levers), viz (body, lidar,
+scanner), the planner (battery) and the mission (the scanner height it plans with, the
+battery) read it; none keeps a copy.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import Annotated
 
 import msgspec
 
+from common.battery import Battery
 from common.config import ConfigError, one_line
 from common.field import ScannerModel
 
@@ -140,9 +142,10 @@ class Limits(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tr
 
 class Robot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """One robot. ``antennas``: the two GNSS antennas, antenna 1 first (its fixes are
-    ``gnss/1/fix``); the compass heading is that of the 1 -> 2 vector less its yaw in
-    base_link. ``track``: distance between the left and right wheels' contact lines;
-    ``wheelbase``: between the front and rear axles (m)."""
+        ``gnss/1/fix``); the compass heading is that of the 1 -> 2 vector less its yaw in
+        base_link. ``track``: distance between the left and right wheels' contact lines;
+        ``wheelbase``: between the front and rear axles (m). ``battery``: what it carries
+    and draws (:class:`common.battery.Battery`)."""
 
     name: Name
     antennas: tuple[GnssAntenna, GnssAntenna]
@@ -153,6 +156,7 @@ class Robot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=Tru
     track: Size
     wheelbase: Size
     limits: Limits
+    battery: Battery = Battery()
 
     def __post_init__(self) -> None:
         a, b = self.antennas

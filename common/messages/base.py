@@ -10,8 +10,10 @@ from common.messages.core import (
     Angle,
     Array,
     Coordinate,
+    Finite,
     Message,
     NonNegative,
+    Probability,
     Velocity,
 )
 
@@ -88,3 +90,15 @@ class BaseStatus(Message, frozen=True, kw_only=True):
     stopped_by_watchdog: bool
     estop: bool
     battery_v: NonNegative = 0.0
+
+
+class BatteryState(Message, frozen=True, kw_only=True):
+    """The battery as the base's driver reports it (sensor_msgs/BatteryState: Clearpath's
+    ``platform/bms/state``): ``percentage`` the charge left, 0-1; ``voltage`` (V) and
+    ``current`` (A, negative while discharging), 0 where the driver gives none;
+    ``present``: a battery is in. The base publishes it at about 1 Hz."""
+
+    percentage: Probability
+    voltage: NonNegative = 0.0
+    current: Finite = 0.0
+    present: bool = True

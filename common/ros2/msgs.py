@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 
 from pycdr2 import IdlStruct
-from pycdr2.types import array, float32, float64, int32, sequence, uint32
+from pycdr2.types import array, float32, float64, int32, sequence, uint8, uint32
 
 
 @dataclass
@@ -114,6 +114,26 @@ class Imu(IdlStruct, typename="sensor_msgs/msg/Imu"):
     linear_acceleration_covariance: array[float64, 9]
 
 
+@dataclass
+class BatteryState(IdlStruct, typename="sensor_msgs/msg/BatteryState"):
+    header: Header
+    voltage: float32
+    temperature: float32
+    current: float32
+    charge: float32
+    capacity: float32
+    design_capacity: float32
+    percentage: float32
+    power_supply_status: uint8
+    power_supply_health: uint8
+    power_supply_technology: uint8
+    present: bool
+    cell_voltage: sequence[float32]
+    cell_temperature: sequence[float32]
+    location: str
+    serial_number: str
+
+
 def twist(v: float, w: float) -> Twist:
     """A planar velocity command: ``v`` m/s along x, ``w`` rad/s about z."""
     return Twist(Vector3(v, 0.0, 0.0), Vector3(0.0, 0.0, w))
@@ -124,6 +144,39 @@ def twist_stamped(v: float, w: float, stamp_ns: int, frame_id: str) -> TwistStam
     Jazzy platform) measures a command's age from this stamp against its own clock and
     brakes past ``cmd_vel_timeout``, so the stamp must be the robot's clock, now."""
     return TwistStamped(Header(time_of_ns(stamp_ns), frame_id), twist(v, w))
+
+
+# sensor_msgs/BatteryState's constants
+POWER_SUPPLY_STATUS_DISCHARGING = 2
+POWER_SUPPLY_HEALTH_GOOD = 1
+POWER_SUPPLY_TECHNOLOGY_UNKNOWN = 0
+
+
+def battery_state(
+    stamp_ns: int, percentage: float, voltage: float, current: float, capacity_ah: float
+) -> BatteryState:
+    """A discharging battery's state as a driver publishes it: ``percentage`` 0-1,
+    ``voltage`` (V), ``current`` (A, negative out of the battery), ``capacity_ah`` its
+    full charge; unmeasured fields NaN, as sensor_msgs asks."""
+    nan = math.nan
+    return BatteryState(
+        header=Header(time_of_ns(stamp_ns), ""),
+        voltage=voltage,
+        temperature=nan,
+        current=current,
+        charge=percentage * capacity_ah,
+        capacity=capacity_ah,
+        design_capacity=capacity_ah,
+        percentage=percentage,
+        power_supply_status=POWER_SUPPLY_STATUS_DISCHARGING,
+        power_supply_health=POWER_SUPPLY_HEALTH_GOOD,
+        power_supply_technology=POWER_SUPPLY_TECHNOLOGY_UNKNOWN,
+        present=True,
+        cell_voltage=[],
+        cell_temperature=[],
+        location="",
+        serial_number="",
+    )
 
 
 def yaw_of(q: Quaternion) -> float:

@@ -51,6 +51,7 @@ TWIST_STAMPED = RosType("geometry_msgs/msg/TwistStamped", msgs.TwistStamped)
 ODOMETRY = RosType("nav_msgs/msg/Odometry", msgs.Odometry)
 LASER_SCAN = RosType("sensor_msgs/msg/LaserScan", msgs.LaserScan)
 IMU = RosType("sensor_msgs/msg/Imu", msgs.Imu)
+BATTERY_STATE = RosType("sensor_msgs/msg/BatteryState", msgs.BatteryState)
 
 # what a base driver takes on ``cmd_vel``, by the name a manifest gives: Clearpath's
 # ROS 2 Jazzy platform takes TwistStamped, most other drivers (and Humble's) Twist

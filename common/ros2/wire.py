@@ -77,6 +77,9 @@ TYPE_HASHES: dict[str, str] = {
     "sensor_msgs/msg/Imu": (
         "RIHS01_7d9a00ff131080897a5ec7e26e315954b8eae3353c3f995c55faf71574000b5b"
     ),
+    "sensor_msgs/msg/BatteryState": (
+        "RIHS01_4bee5dfce981c98faa6828b868307a0a73f992ed0789f374ee96c8f840e69741"
+    ),
 }
 
 # the endpoints we declare: publishers and subscriptions; services (SS, SC) are not spoken

@@ -1,32 +1,53 @@
-"""Base backends: what drives the wheels and where odometry, the IMU and the 2D lidar
-come from. ``BACKENDS`` maps the config's ``backend`` to a class."""
+"""Base backends: what drives the wheels and where odometry, the IMU, the 2D lidar and
+the battery's state come from. ``BACKENDS`` maps the config's ``backend`` to a class."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import threading
 from collections.abc import Callable
-from typing import Protocol
-
-import msgspec
-import numpy as np
+from typing import Any, Protocol
 
 from common import keys
-from common.messages.base import Imu, LaserScan
-from common.messages.core import Array
+from common.messages.base import BatteryState, Imu, LaserScan
 from common.messages.sim import SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
+from common.ros2.types import BATTERY_STATE, CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
 from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
 from services.base.config import BaseConfig
+from services.base.ros2_convert import (
+    battery_from_ros,
+    decode_battery,
+    decode_imu,
+    decode_odometry,
+    decode_scan,
+    imu_from_ros,
+    scan_from_ros,
+)
 
 # (stamp_ns, v, w) from the wheel encoders
 EncoderCallback = Callable[[int, float, float], None]
 # a ready odometry pose from the base itself: (stamp_ns, x, y, yaw, v, w)
 OdomCallback = Callable[[int, float, float, float, float, float], None]
+
+
+def _ignore(*_: Any) -> None:
+    pass
+
+
+@dataclasses.dataclass(frozen=True)
+class Sinks:
+    """Where a backend hands what the base senses (each ignored unless given)."""
+
+    encoders: EncoderCallback = _ignore
+    odom: OdomCallback = _ignore
+    scan: Callable[[LaserScan], None] = _ignore
+    imu: Callable[[Imu], None] = _ignore
+    battery: Callable[[BatteryState], None] = _ignore
 
 
 class Drive(Protocol):
@@ -36,86 +57,17 @@ class Drive(Protocol):
 
 
 class SimBase:
-    """The simulator's Husky: wheel commands out, encoders and lidar in."""
+    """The simulator's Husky: wheel commands out; encoders, lidar, IMU and battery in."""
 
-    def __init__(
-        self,
-        cfg: BaseConfig,
-        bus: Bus,
-        on_encoders: EncoderCallback,
-        on_odom: OdomCallback,
-        on_scan: Callable[[LaserScan], None],
-        on_imu: Callable[[Imu], None],
-    ) -> None:
+    def __init__(self, cfg: BaseConfig, bus: Bus, sinks: Sinks) -> None:
         self._wheels = bus.publisher(keys.SIM_WHEELS)
-        bus.subscribe(keys.SIM_ENCODERS, lambda m: on_encoders(m.stamp_ns, m.v, m.w))
-        bus.subscribe(keys.SIM_LIDAR, on_scan)
-        bus.subscribe(keys.SIM_IMU, on_imu)
+        bus.subscribe(keys.SIM_ENCODERS, lambda m: sinks.encoders(m.stamp_ns, m.v, m.w))
+        bus.subscribe(keys.SIM_LIDAR, sinks.scan)
+        bus.subscribe(keys.SIM_IMU, sinks.imu)
+        bus.subscribe(keys.SIM_BATTERY, sinks.battery)
 
     def send(self, v: float, w: float, stamp_ns: int) -> None:
         self._wheels.put(SimWheelCommand(stamp_ns=stamp_ns, v=v, w=w))
-
-
-def decode_odometry(data: bytes) -> ros.Odometry:
-    return ros.Odometry.deserialize(data)
-
-
-def decode_scan(data: bytes) -> ros.LaserScan:
-    return ros.LaserScan.deserialize(data)
-
-
-def decode_imu(data: bytes) -> ros.Imu:
-    return ros.Imu.deserialize(data)
-
-
-def imu_from_ros(m: ros.Imu) -> Imu:
-    """The bus message of a sensor_msgs/Imu: orientation as ZYX Euler angles,
-    ``tilt_var`` the mean of the roll and pitch variances the driver states. Raises
-    ValueError naming the field when the message holds no orientation (sensor_msgs:
-    a first covariance element of -1; navigation would take its zero quaternion for a
-    level robot), or a value is not finite or is outside the bus message's bounds
-    (which every subscriber would refuse on decode)."""
-    q = m.orientation
-    if not all(math.isfinite(c) for c in (q.x, q.y, q.z, q.w)):
-        raise ValueError(f"orientation ({q.x}, {q.y}, {q.z}, {q.w}) is not finite")
-    var_roll, var_pitch = (float(v) for v in np.asarray(m.orientation_covariance)[[0, 4]])
-    if var_roll < 0.0:
-        raise ValueError("orientation_covariance[0] < 0: the IMU states no orientation")
-    roll, pitch, yaw = ros.euler_of(q)
-    tilt_var = 0.5 * (var_roll + max(var_pitch, 0.0))
-    w, a = m.angular_velocity, m.linear_acceleration
-    fields = {
-        "stamp_ns": ros.ns_of_time(m.header.stamp),
-        "frame_id": m.header.frame_id,
-        "roll": roll,
-        "pitch": pitch,
-        "yaw": yaw,
-        "wx": w.x,
-        "wy": w.y,
-        "wz": w.z,
-        "ax": a.x,
-        "ay": a.y,
-        "az": a.z,
-        "tilt_var": tilt_var,
-    }
-    # the constructor does not check the schema's bounds (finite included): convert does
-    return msgspec.convert(fields, Imu)
-
-
-def scan_from_ros(m: ros.LaserScan) -> LaserScan:
-    ranges = np.asarray(m.ranges, dtype=np.float32)
-    # REP-117: below range_min or above range_max is "no return"
-    ranges = np.where((ranges < m.range_min) | (ranges > m.range_max), np.inf, ranges)
-    return LaserScan(
-        stamp_ns=ros.ns_of_time(m.header.stamp),
-        frame_id=m.header.frame_id,
-        angle_min=m.angle_min,
-        angle_max=m.angle_max,
-        angle_increment=m.angle_increment,
-        range_min=max(0.0, m.range_min),
-        range_max=max(0.0, m.range_max),
-        ranges=Array.of(ranges.astype(np.float32)),
-    )
 
 
 class OdomWatch:
@@ -146,31 +98,50 @@ class OdomWatch:
             return self.stale
 
 
+class Refusals:
+    """Messages from the driver refused for a bad value: counted in the health counter
+    ``name``, the first one logged (a driver that keeps sending them would flood the
+    log)."""
+
+    def __init__(self, bus: Bus, name: str, what: str) -> None:
+        self.count = 0
+        self._what = what
+        self._log = logging.getLogger(bus.name)
+        self._lock = threading.Lock()
+        bus.report(name, lambda: self.count)
+
+    def passed(self, convert: Callable[[Any], Any], m: Any, to: Callable[[Any], None]) -> None:
+        """``to(convert(m))``, or the refusal counted when convert raises ValueError."""
+        try:
+            out = convert(m)
+        except ValueError as exc:
+            with self._lock:
+                self.count += 1
+                first = self.count == 1
+            if first:
+                self._log.warning("%s refused (later ones only counted): %s", self._what, exc)
+            return
+        to(out)
+
+
 class Ros2Base:
-    """Any ROS 2 base: Twist or TwistStamped out, Odometry, LaserScan and Imu in, CDR
-    payloads. Through
-    rmw_zenoh (``ros2_layout = "rmw_zenoh"``, :mod:`common.ros2`): this service is a
-    ROS 2 node on the Zenoh network; through zenoh-bridge-ros2dds (``"bridge"``): the
-    bridge maps ROS topic ``/cmd_vel`` to the Zenoh key ``cmd_vel`` (and so on).
+    """Any ROS 2 base: Twist or TwistStamped out; Odometry, LaserScan, Imu and
+    BatteryState in; CDR payloads. Through rmw_zenoh (``ros2_layout = "rmw_zenoh"``,
+    :mod:`common.ros2`): this service is a ROS 2 node on the Zenoh network; through
+    zenoh-bridge-ros2dds (``"bridge"``): the bridge maps ROS topic ``/cmd_vel`` to the
+    Zenoh key ``cmd_vel`` (and so on).
 
     With no odometry for ``ros2_odom_timeout_s`` the driver is taken for gone: the
     wheels are commanded to zero (so a driver that returns does not resume an old
     command) and one log line says so, another when odometry is back; the health
     counter ``ros2_odom_stale`` is 1 meanwhile.
 
-    An Imu with a value that is not finite or out of the bus message's bounds is
-    dropped: counted in the health counter ``ros2_imu_refused``, the first one logged
-    (payloads that are not CDR at all are dropped and counted as for odometry)."""
+    An Imu or a BatteryState with a value that is not finite or out of the bus
+    message's bounds is dropped: counted in the health counters ``ros2_imu_refused``
+    and ``ros2_battery_refused``, the first one logged (payloads that are not CDR at
+    all are dropped and counted as for odometry)."""
 
-    def __init__(
-        self,
-        cfg: BaseConfig,
-        bus: Bus,
-        on_encoders: EncoderCallback,
-        on_odom: OdomCallback,
-        on_scan: Callable[[LaserScan], None],
-        on_imu: Callable[[Imu], None],
-    ) -> None:
+    def __init__(self, cfg: BaseConfig, bus: Bus, sinks: Sinks) -> None:
         self._log = logging.getLogger(bus.name)
         self._timeout_s = cfg.ros2_odom_timeout_s
         self._watch = OdomWatch(int(cfg.ros2_odom_timeout_s * 1e9))
@@ -179,7 +150,7 @@ class Ros2Base:
         def odom(m: ros.Odometry) -> None:
             self._watch.heard()
             p, t = m.pose.pose, m.twist.twist
-            on_odom(
+            sinks.odom(
                 ros.ns_of_time(m.header.stamp),
                 p.position.x,
                 p.position.y,
@@ -189,26 +160,18 @@ class Ros2Base:
             )
 
         def scan(m: ros.LaserScan) -> None:
-            on_scan(scan_from_ros(m))
+            sinks.scan(scan_from_ros(m))
 
-        self.imu_refused = 0
-        self._imu_lock = threading.Lock()
-        bus.report("ros2_imu_refused", lambda: self.imu_refused)
+        imus = Refusals(bus, "ros2_imu_refused", "IMU from the ROS 2 base")
+        batteries = Refusals(bus, "ros2_battery_refused", "battery state from the ROS 2 base")
 
         def imu(m: ros.Imu) -> None:
-            try:
-                msg = imu_from_ros(m)
-            except ValueError as exc:
-                with self._imu_lock:
-                    self.imu_refused += 1
-                    first = self.imu_refused == 1
-                if first:
-                    self._log.warning(
-                        "IMU from the ROS 2 base refused (later ones only counted): %s", exc
-                    )
-                return
-            on_imu(msg)
+            imus.passed(imu_from_ros, m, sinks.imu)
 
+        def battery(m: ros.BatteryState) -> None:
+            batteries.passed(battery_from_ros, m, sinks.battery)
+
+        self._imus = imus
         self._cmd_type = CMD_VEL_TYPES[cfg.ros2_cmd_vel_type]
         self._frame = cfg.ros2_cmd_vel_frame
         self._put: Callable[[ros.Twist | ros.TwistStamped], None]
@@ -217,6 +180,7 @@ class Ros2Base:
             bus.subscribe_raw(cfg.ros2_odom, decode_odometry, odom)
             bus.subscribe_raw(cfg.ros2_scan, decode_scan, scan)
             bus.subscribe_raw(cfg.ros2_imu, decode_imu, imu)
+            bus.subscribe_raw(cfg.ros2_battery, decode_battery, battery)
             self._put = lambda t: bus.put_raw(key, t.serialize())
         else:
             node = Ros2Node(bus.session, cfg.ros2_node, cfg.ros2_namespace, cfg.ros2_domain)
@@ -225,7 +189,13 @@ class Ros2Base:
             node.subscribe(cfg.ros2_odom, ODOMETRY, odom)
             node.subscribe(cfg.ros2_scan, LASER_SCAN, scan, qos=SENSOR_QOS)
             node.subscribe(cfg.ros2_imu, IMU, imu, qos=SENSOR_QOS)
+            # Clearpath's battery node publishes with the sensor-data QoS
+            node.subscribe(cfg.ros2_battery, BATTERY_STATE, battery, qos=SENSOR_QOS)
             self.node = node
+
+    @property
+    def imu_refused(self) -> int:
+        return self._imus.count
 
     def send(self, v: float, w: float, stamp_ns: int) -> None:
         if not (math.isfinite(v) and math.isfinite(w)):

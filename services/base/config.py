@@ -19,8 +19,9 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ``backend``: ``sim`` (the simulator's base) or ``ros2`` (any ROS 2 base, the
     Husky's own driver included: Twist out on ``ros2_cmd_vel``, Odometry in on
     ``ros2_odom``, LaserScan in on ``ros2_scan``, sensor_msgs/Imu in on ``ros2_imu``:
-    the Husky's UM7 driver publishes ``imu/data``). ``ros2_layout`` says how ROS 2 is
-    reached: ``rmw_zenoh`` (the ROS 2 nodes run ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``,
+    the Husky's UM7 driver publishes ``imu/data``; sensor_msgs/BatteryState in on
+    ``ros2_battery``: Clearpath's Jazzy platform publishes ``platform/bms/state``).
+    ``ros2_layout`` says how ROS 2 is reached: ``rmw_zenoh`` (the ROS 2 nodes run ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``,
     Jazzy's rmw_zenoh 0.2.x, and share this Zenoh network; topic names resolve against
     ``ros2_namespace``, the base appears in ``ros2 node list`` as ``ros2_node`` in
     domain ``ros2_domain``) or ``bridge`` (zenoh-bridge-ros2dds maps ROS topic
@@ -55,6 +56,7 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ros2_odom: Topic = "odom"
     ros2_scan: Topic = "scan"
     ros2_imu: Topic = "imu/data"
+    ros2_battery: Topic = "battery_state"
     ros2_layout: Literal["rmw_zenoh", "bridge"] = "rmw_zenoh"
     # ROS_DOMAIN_ID's range (0-232: what DDS port arithmetic allows, kept by rmw_zenoh)
     ros2_domain: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0

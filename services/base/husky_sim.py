@@ -14,7 +14,10 @@ As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
 - publishes ``scan`` (sensor_msgs/LaserScan) from ``sim/device/lidar``;
 - publishes ``imu/data`` (sensor_msgs/Imu) from ``sim/device/imu``, as the Husky's
   UM7 driver does: roll and pitch variance the simulator's ``tilt_var``, yaw
-  variance ``yaw_var`` (a magnetometer heading beside the motors).
+  variance ``yaw_var`` (a magnetometer heading beside the motors);
+- publishes ``battery_state`` (sensor_msgs/BatteryState) from
+  ``sim/device/battery``, as Clearpath's battery node does on
+  ``platform/bms/state``: the charge as a fraction and in Ah of the 24 V pack.
 
 Stamps are on the service clock (the sim clock in a simulated deployment).
 The fault hook (``HuskySim.fault``; SIGUSR1 in the process, SIGUSR2 to undo) makes it
@@ -33,11 +36,19 @@ import msgspec
 import numpy as np
 
 from common import keys
-from common.messages.base import Imu, LaserScan
+from common.messages.base import BatteryState, Imu, LaserScan
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
-from common.ros2.types import CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY, CmdVelType, twist_of
+from common.ros2.types import (
+    BATTERY_STATE,
+    CMD_VEL_TYPES,
+    IMU,
+    LASER_SCAN,
+    ODOMETRY,
+    CmdVelType,
+    twist_of,
+)
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 from common.service import Context, run
 from services.base.drive import OdometryIntegrator
@@ -54,16 +65,19 @@ IMU_YAW_VAR = math.radians(5.0) ** 2
 IMU_GYRO_VAR = 4e-4
 IMU_ACCEL_VAR = 1e-2
 
+# the Husky's pack: sealed lead acid, 24 V nominal (the user manual)
+PACK_V = 24.0
+
 
 class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The simulated driver as a ROS 2 node: topics as the base service's
-    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu`` name them, resolved
-    against ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x,
+    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu``/``ros2_battery`` name
+    them, resolved against ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x,
     y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the IMU's yaw variance
     (rad^2). ``cmd_vel_type = "TwistStamped"`` with ``namespace = "/a200_0000"``,
     ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"`` and ``imu =
-    "sensors/imu_0/data"`` plays Clearpath's ROS 2 Jazzy platform, which also refuses a
-    stamped command older than ``cmd_vel_timeout_s`` by its own clock
+    "sensors/imu_0/data"``, ``battery = "platform/bms/state"`` plays Clearpath's ROS 2
+    Jazzy platform, which also refuses a stamped command older than ``cmd_vel_timeout_s`` by its own clock
     (diff_drive_controller's ``cmd_vel_timeout``: its default, 0.5 s, here; Clearpath's
     husky_control sets 0.25 s, the figure docs/devices.md gives for the wheels' stop)
     and takes a zero stamp as now."""
@@ -76,6 +90,7 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     odom: Topic = "odom"
     scan: Topic = "scan"
     imu: Topic = "imu/data"
+    battery: Topic = "battery_state"
     odom_frame: str = "odom"
     base_frame: str = "base_link"
     pose_covariance: Cov6 = HUSKY_COVARIANCE
@@ -135,6 +150,7 @@ class HuskySim:
         self._odom_pub = self.node.publisher(cfg.odom, ODOMETRY)
         self._scan_pub = self.node.publisher(cfg.scan, LASER_SCAN, qos=SENSOR_QOS)
         self._imu_pub = self.node.publisher(cfg.imu, IMU, qos=SENSOR_QOS)
+        self._battery_pub = self.node.publisher(cfg.battery, BATTERY_STATE, qos=SENSOR_QOS)
         self._wheels = ctx.bus.publisher(keys.SIM_WHEELS)
         ctx.bus.report("ros2_dropped", lambda: self.node.dropped_total)
         ctx.bus.report("commands_refused", lambda: self.refused)
@@ -142,6 +158,7 @@ class HuskySim:
         ctx.bus.subscribe(keys.SIM_ENCODERS, self._on_encoders)
         ctx.bus.subscribe(keys.SIM_LIDAR, self._on_lidar)
         ctx.bus.subscribe(keys.SIM_IMU, self._on_imu)
+        ctx.bus.subscribe(keys.SIM_BATTERY, self._on_battery)
 
     def fault(self, silent: bool) -> None:
         """Go silent (the ROS 2 driver gone) or come back."""
@@ -196,6 +213,12 @@ class HuskySim:
     def _on_imu(self, m: Imu) -> None:
         if not self.silent:
             self._imu_pub.put(imu_to_ros(m, self.ctx.clock.now_ns(), self.cfg.yaw_var))
+
+    def _on_battery(self, m: BatteryState) -> None:
+        if not self.silent:
+            pct, now = m.percentage, self.ctx.clock.now_ns()
+            ah = self.ctx.robot.battery.capacity_wh / PACK_V
+            self._battery_pub.put(ros.battery_state(now, pct, m.voltage, m.current, ah))
 
     def run(self, stop: threading.Event) -> None:
         stop.wait()

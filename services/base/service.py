@@ -1,5 +1,5 @@
 """The base service's Zenoh shell: velocity commands in (through the watchdog and the
-e-stop), wheel odometry, the IMU, lidar and status out."""
+e-stop), wheel odometry, the IMU, lidar, the battery's state and status out."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from common import keys
 from common.messages.base import BaseStatus, EStop, LaserScan, Odometry, Twist
 from common.service import Context
 from common.status import parse_token
-from services.base.backends import BACKENDS
+from services.base.backends import BACKENDS, Sinks
 from services.base.config import BaseConfig
 from services.base.drive import CommandGate, OdometryIntegrator
 
@@ -26,9 +26,15 @@ class BaseService:
         self.scan_pub = ctx.bus.publisher(keys.BASE_SCAN)
         self.imu_pub = ctx.bus.publisher(keys.BASE_IMU)
         self.status_pub = ctx.bus.publisher(keys.BASE_STATUS)
-        self.drive = BACKENDS[cfg.backend](
-            cfg, ctx.bus, self._on_encoders, self._on_odom, self._on_scan, self.imu_pub.put
+        self.battery_pub = ctx.bus.publisher(keys.BASE_BATTERY)
+        sinks = Sinks(
+            encoders=self._on_encoders,
+            odom=self._on_odom,
+            scan=self._on_scan,
+            imu=self.imu_pub.put,
+            battery=self.battery_pub.put,
         )
+        self.drive = BACKENDS[cfg.backend](cfg, ctx.bus, sinks)
         ctx.bus.subscribe(keys.BASE_CMD_VEL, self._on_cmd)
         ctx.bus.subscribe(keys.BASE_ESTOP, self._on_estop)
         self._commanders: set[str] = set()  # liveliness tokens of the commander

@@ -21,7 +21,15 @@ from zenoh_ros2_sdk.keyexpr import endpoint_liveliness_keyexpr, node_liveliness_
 from common.ros2 import msgs as ros
 from common.ros2 import wire
 from common.ros2.node import Ros2Node
-from common.ros2.types import IMU, LASER_SCAN, ODOMETRY, TWIST, TWIST_STAMPED, RosType
+from common.ros2.types import (
+    BATTERY_STATE,
+    IMU,
+    LASER_SCAN,
+    ODOMETRY,
+    TWIST,
+    TWIST_STAMPED,
+    RosType,
+)
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 ZID = "4b33868af7b46327b80673b0f621d09b"
@@ -29,7 +37,9 @@ TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6f
 
 
 @pytest.mark.parametrize(
-    "rtype", [TWIST, TWIST_STAMPED, ODOMETRY, LASER_SCAN, IMU], ids=lambda t: t.name
+    "rtype",
+    [TWIST, TWIST_STAMPED, ODOMETRY, LASER_SCAN, IMU, BATTERY_STATE],
+    ids=lambda t: t.name,
 )
 def test_type_hashes_are_rosbags_rihs01(rtype: RosType[object]) -> None:
     assert rtype.type_hash == JAZZY.hash_rihs01(rtype.name)
@@ -202,6 +212,16 @@ def test_imu_cdr_is_rosbags_cdr() -> None:
     assert bytes(JAZZY.serialize_cdr(back, IMU.name)) == data
     again = IMU.decode(bytes(JAZZY.serialize_cdr(back, IMU.name)))
     assert ros.euler_of(again.orientation) == pytest.approx((0.1, -0.2, 3.0), abs=1e-12)
+
+
+def test_battery_state_cdr_is_rosbags_cdr() -> None:
+    data = BATTERY_STATE.encode(ros.battery_state(5_000_000_001, 0.625, 25.5, -4.0, 20.0))
+    back: Any = JAZZY.deserialize_cdr(data, BATTERY_STATE.name)
+    assert (back.header.stamp.sec, back.header.stamp.nanosec) == (5, 1)
+    assert (back.percentage, back.voltage, back.current) == (0.625, 25.5, -4.0)
+    assert (back.charge, back.capacity, back.present) == (12.5, 20.0, True)
+    assert math.isnan(back.temperature) and back.power_supply_status == 2
+    assert bytes(JAZZY.serialize_cdr(back, BATTERY_STATE.name)) == data
 
 
 def test_node_drops_bad_samples_and_keeps_going(

@@ -11,11 +11,12 @@ import msgspec
 import pytest
 
 from common.config import ConfigError, decode_section
-from common.messages.base import Imu
+from common.messages.base import BatteryState, Imu
 from common.ros2 import msgs as ros
 from common.ros2.types import twist_of
 from common.transport import Bus
-from services.base.backends import OdomWatch, Ros2Base, decode_odometry, imu_from_ros
+from services.base.backends import OdomWatch, Ros2Base, Sinks
+from services.base.ros2_convert import battery_from_ros, decode_odometry, imu_from_ros
 from services.base.config import BaseConfig
 from services.base.husky_sim import HuskySimConfig, command_age_s
 from tests.conftest import Record
@@ -53,7 +54,7 @@ def test_bridge_layout_uses_plain_keys(client_bus: Bus) -> None:
         odom.append(a)  # type: ignore[arg-type]
         got.set()
 
-    base = Ros2Base(cfg, client_bus, lambda *_: None, on_odom, lambda _: None, lambda _: None)
+    base = Ros2Base(cfg, client_bus, Sinks(odom=on_odom))
     cmds: list[ros.Twist] = []
     sent = threading.Event()
 
@@ -115,7 +116,7 @@ def test_bridge_layout_imu_drops_bad_messages(
 ) -> None:
     cfg = BaseConfig(backend="ros2", ros2_layout="bridge", ros2_imu="t/imu")
     imus: Record[Imu] = Record()
-    base = Ros2Base(cfg, client_bus, lambda *_: None, lambda *_: None, lambda _: None, imus.add)
+    base = Ros2Base(cfg, client_bus, Sinks(imu=imus.add))
     with caplog.at_level(logging.WARNING):
         client_bus.put_raw("t/imu", _imu(roll=math.nan).serialize())
         client_bus.put_raw("t/imu", _imu(wx=math.inf).serialize())
@@ -137,9 +138,7 @@ def test_twist_stamped_carries_the_command_stamp_and_frame(client_bus: Bus) -> N
         backend="ros2", ros2_layout="bridge", ros2_cmd_vel="s/cmd_vel",
         ros2_cmd_vel_type="TwistStamped", ros2_cmd_vel_frame="base_link",
     )  # fmt: skip
-    base = Ros2Base(
-        cfg, client_bus, lambda *_: None, lambda *_: None, lambda _: None, lambda _: None
-    )
+    base = Ros2Base(cfg, client_bus, Sinks())
     got: Record[ros.TwistStamped] = Record()
     client_bus.subscribe_raw("s/cmd_vel", ros.TwistStamped.deserialize, got.add)
     for _ in range(50):  # until the subscription has reached the base's session
@@ -151,6 +150,45 @@ def test_twist_stamped_carries_the_command_stamp_and_frame(client_bus: Bus) -> N
     assert (m.twist.linear.x, m.twist.angular.z) == (0.3, -0.1)
     assert (m.header.stamp.sec, m.header.stamp.nanosec) == (12, 345)
     assert m.header.frame_id == "base_link"
+
+
+def test_battery_from_ros() -> None:
+    m = battery_from_ros(ros.battery_state(3 * 10**9, 0.4, 25.1, -6.0, 20.0))
+    assert (m.stamp_ns, m.percentage, m.voltage, m.current) == (3 * 10**9, 0.4, 25.1, -6.0)
+    # no percentage: the charge over the capacity; no voltage: 0
+    r = ros.battery_state(0, 0.25, math.nan, math.nan, 20.0)
+    r.percentage = math.nan
+    m = battery_from_ros(r)
+    assert (m.percentage, m.voltage, m.current) == (0.25, 0.0, 0.0)
+    r.capacity = math.nan
+    with pytest.raises(ValueError, match="percentage is NaN"):
+        battery_from_ros(r)
+    with pytest.raises(ValueError, match="percentage 85 is outside 0-1"):
+        battery_from_ros(ros.battery_state(0, 85.0, 25.0, -1.0, 20.0))
+
+
+def test_battery_state_reaches_the_bus_and_bad_ones_are_counted(
+    client_bus: Bus, caplog: pytest.LogCaptureFixture
+) -> None:
+    cfg = BaseConfig(backend="ros2", ros2_layout="bridge", ros2_battery="b/bms/state")
+    got: Record[BatteryState] = Record()
+    base = Ros2Base(cfg, client_bus, Sinks(battery=got.add))
+    bad = ros.battery_state(0, 85.0, 25.0, -1.0, 20.0)
+    good = ros.battery_state(7 * 10**9, 0.55, 25.0, -5.0, 20.0)
+    with caplog.at_level(logging.WARNING):
+        for _ in range(50):  # until the subscription has reached the session
+            client_bus.put_raw("b/bms/state", bad.serialize())
+            client_bus.put_raw("b/bms/state", good.serialize())
+            if got.until(bool, timeout=0.1):
+                break
+    m = got.wait_for(lambda m: True, timeout=1.0)
+    assert m is not None and m.percentage == pytest.approx(0.55)
+    assert client_bus.reports()["ros2_battery_refused"] >= 1
+    refused = [
+        r for r in caplog.records if "battery state from the ROS 2 base refused" in r.message
+    ]
+    assert len(refused) == 1 and "outside 0-1" in refused[0].message, caplog.text
+    assert base.imu_refused == 0
 
 
 def test_emulated_clearpath_driver_ages_stamped_commands() -> None:

@@ -11,7 +11,7 @@ import pytest
 
 from common.ros2 import msgs as ros
 from common.ros2.types import IMU
-from services.base.backends import decode_odometry, scan_from_ros
+from services.base.ros2_convert import decode_odometry, scan_from_ros
 
 
 def test_twist_bytes_are_ros2_cdr() -> None:
