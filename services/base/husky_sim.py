@@ -72,15 +72,16 @@ PACK_V = 24.0
 class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The simulated driver as a ROS 2 node: topics as the base service's
     ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu``/``ros2_battery`` name
-    them, resolved against ``namespace``; ``pose_covariance``/``twist_covariance`` the diagonals (x,
-    y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the IMU's yaw variance
-    (rad^2). ``cmd_vel_type = "TwistStamped"`` with ``namespace = "/a200_0000"``,
-    ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"`` and ``imu =
-    "sensors/imu_0/data"``, ``battery = "platform/bms/state"`` plays Clearpath's ROS 2
-    Jazzy platform, which also refuses a stamped command older than ``cmd_vel_timeout_s`` by its own clock
-    (diff_drive_controller's ``cmd_vel_timeout``: its default, 0.5 s, here; Clearpath's
-    husky_control sets 0.25 s, the figure docs/devices.md gives for the wheels' stop)
-    and takes a zero stamp as now."""
+    them, resolved against ``namespace``; ``pose_covariance``/``twist_covariance``
+    the diagonals (x, y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the
+    IMU's yaw variance (rad^2). ``cmd_vel_type = "TwistStamped"`` with ``namespace =
+    "/a200_0000"``, ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"``,
+    ``imu = "sensors/imu_0/data"`` and ``battery = "platform/bms/state"`` plays
+    Clearpath's ROS 2 Jazzy platform, which also refuses a stamped command older than
+    ``cmd_vel_timeout_s`` by its own clock (diff_drive_controller's
+    ``cmd_vel_timeout``: its default, 0.5 s, here; Clearpath's husky_control sets
+    0.25 s, the figure docs/devices.md gives for the wheels' stop) and takes a zero
+    stamp as now."""
 
     domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
     namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
