@@ -21,8 +21,8 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ``ros2_odom``, LaserScan in on ``ros2_scan``, sensor_msgs/Imu in on ``ros2_imu``:
     the Husky's UM7 driver publishes ``imu/data``; sensor_msgs/BatteryState in on
     ``ros2_battery``: Clearpath's Jazzy platform publishes ``platform/bms/state``).
-    ``ros2_layout`` says how ROS 2 is reached: ``rmw_zenoh`` (the ROS 2 nodes run ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``,
-    Jazzy's rmw_zenoh 0.2.x, and share this Zenoh network; topic names resolve against
+    ``ros2_layout`` says how ROS 2 is reached: ``rmw_zenoh`` (the ROS 2 nodes run
+    ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``, Jazzy's rmw_zenoh 0.2.x, and share this Zenoh network; topic names resolve against
     ``ros2_namespace``, the base appears in ``ros2 node list`` as ``ros2_node`` in
     domain ``ros2_domain``) or ``bridge`` (zenoh-bridge-ros2dds maps ROS topic
     ``/cmd_vel`` to the plain Zenoh key ``cmd_vel``). ``ros2_odom_timeout_s``: with no
