@@ -16,18 +16,19 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     0.25 s is five missed commands, and a robot at 0.5 m/s whose navigation dies stands
     within 0.2 m (0.125 m to the trip, about 0.08 m of drivetrain lag).
 
-    ``backend``: ``sim`` (the simulator's base) or ``ros2`` (any ROS 2 base, the
-    Husky's own driver included: Twist out on ``ros2_cmd_vel``, Odometry in on
-    ``ros2_odom``, LaserScan in on ``ros2_scan``, sensor_msgs/Imu in on ``ros2_imu``:
-    the Husky's UM7 driver publishes ``imu/data``; sensor_msgs/BatteryState in on
-    ``ros2_battery``: Clearpath's Jazzy platform publishes ``platform/bms/state``).
-    ``ros2_layout`` says how ROS 2 is reached: ``rmw_zenoh`` (the ROS 2 nodes run
-    ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``, Jazzy's rmw_zenoh 0.2.x, and share this Zenoh network; topic names resolve against
-    ``ros2_namespace``, the base appears in ``ros2 node list`` as ``ros2_node`` in
-    domain ``ros2_domain``) or ``bridge`` (zenoh-bridge-ros2dds maps ROS topic
-    ``/cmd_vel`` to the plain Zenoh key ``cmd_vel``). ``ros2_odom_timeout_s``: with no
-    odometry from the ROS 2 base for this long (its driver is gone, or the link to
-    it), the base commands zero until odometry returns, and says so in its log.
+    ``backend``: ``sim`` (the simulator's base) or ``ros2`` (any ROS 2 base, the Husky's
+    own driver included: Twist out on ``ros2_cmd_vel``, Odometry in on ``ros2_odom``,
+    LaserScan in on ``ros2_scan``, sensor_msgs/Imu in on ``ros2_imu``: the Husky's UM7
+    driver publishes ``imu/data``; sensor_msgs/BatteryState in on ``ros2_battery``:
+    Clearpath's Jazzy platform publishes ``platform/bms/state``). ``ros2_layout`` says
+    how ROS 2 is reached: ``rmw_zenoh`` (the ROS 2 nodes run
+    ``RMW_IMPLEMENTATION=rmw_zenoh_cpp``, Jazzy's rmw_zenoh 0.2.x, and share this Zenoh
+    network; topic names resolve against ``ros2_namespace``, the base appears in ``ros2
+    node list`` as ``ros2_node`` in domain ``ros2_domain``) or ``bridge``
+    (zenoh-bridge-ros2dds maps ROS topic ``/cmd_vel`` to the plain Zenoh key
+    ``cmd_vel``). ``ros2_odom_timeout_s``: with no odometry from the ROS 2 base for this
+    long (its driver is gone, or the link to it), the base commands zero until odometry
+    returns, and says so in its log.
 
     ``ros2_cmd_vel_type``: ``Twist`` (geometry_msgs/msg/Twist: ROS 2 Humble's
     Clearpath stack, most drivers) or ``TwistStamped`` (Clearpath's ROS 2 Jazzy
