@@ -36,7 +36,8 @@ class Battery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=T
     carries (computers, receivers, the scanner); ``drive_w``: more while the wheels
     turn; ``reserve``: the fraction of the capacity never to be used (the charge a
     swap must come before); ``swap_s``: how long a swap takes once the robot waits
-    at the Origin. The defaults are the Husky A200's (``common/robots/husky.toml``
+    at the Origin; ``voltage_v``: the pack's nominal voltage (the model counts charge
+    at a constant voltage). The defaults are the Husky A200's (``common/robots/husky.toml``
     says where each comes from)."""
 
     capacity_wh: Energy = 480.0
@@ -45,6 +46,7 @@ class Battery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=T
     drive_w: Power = 100.0
     reserve: Fraction = 0.2
     swap_s: Seconds = 600.0
+    voltage_v: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 24.0
 
     def power_w(self, moving: bool) -> float:
         """What the robot draws (W), its wheels turning or not."""

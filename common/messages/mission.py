@@ -45,6 +45,8 @@ class MissionPhase(enum.StrEnum):
     SETTLING = "settling"
     SCANNING = "scanning"
     RETURNING = "returning"
+    # at the Origin, waiting for a battery swap (common.battery)
+    SWAPPING = "swapping"
     PAUSED = "paused"
     DONE = "done"
     ABORTED = "aborted"

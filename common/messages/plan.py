@@ -11,6 +11,7 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.battery import Battery, Estimate, Pace
 from common.field import FieldLayout, ScannerModel
 from common.messages.core import Array, Coordinate, Finite, Message, NonNegative, Positive
 from common.messages.nav import Leg
@@ -28,7 +29,9 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     or ``grid`` (the scanner's angular grid, ``grid_step_deg`` overriding its step).
     ``coverage_target``: fraction of the coverable cells to cover; ``min_hits``: rays
     (or sample points) a candidate needs on a cell to count as seeing it.
-    ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``.
+    ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``. ``pace``: how fast the
+    survey goes, for its time estimate and the swaps it foretells
+    (:class:`common.battery.Pace`).
     """
 
     nav: Literal["br", "aha", "lanes"] = "aha"
@@ -43,6 +46,7 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     tour_time_limit_s: Seconds = 10.0
     open_rows: list[int] | None = None
     open_cross: list[int] | None = None
+    pace: Pace = msgspec.field(default_factory=Pace)
 
 
 class Candidate(msgspec.Struct, frozen=True, kw_only=True):
@@ -109,7 +113,11 @@ class PlanResult(Message, frozen=True, kw_only=True):
     locations that see it (what the dashboard colours the cells by).
     ``footprints``: the plots' boxes in the field file, when ``plot_boxes`` are not
     them (a plan on the crop as a survey measured it plans on the measured canopy;
-    its traits are still cut by the field book's plots); :meth:`plot_footprints`."""
+    its traits are still cut by the field book's plots); :meth:`plot_footprints`.
+    ``via_origin``: each selected location's round trip from the Origin along the
+    lanes (the way a robot leaves for a battery swap and comes back); ``survey``: the
+    survey's time and energy at the options' pace, with the swaps the request's
+    battery asks for (:func:`common.battery.estimate`)."""
 
     field: str
     layout: FieldLayout
@@ -126,6 +134,12 @@ class PlanResult(Message, frozen=True, kw_only=True):
     timings: dict[str, NonNegative]
     cell_views: Array | None = None
     footprints: Array | None = None
+    via_origin: dict[int, list[Leg]] | None = None
+    survey: Estimate | None = None
+
+    def legs_scan_ids(self) -> list[int]:
+        """The scan ids in tour order (the legs that end at a location)."""
+        return [g.scan_id for g in self.legs if g.scan_id is not None]
 
     def plot_footprints(self) -> npt.NDArray[np.float64]:
         """(P, 6) the plots as the field file has them (whatever boxes were planned on)."""
@@ -136,10 +150,12 @@ class PlanResult(Message, frozen=True, kw_only=True):
 class PlanRequest(Message, frozen=True, kw_only=True):
     """Ask the planner for a plan. Give the field exactly one way: ``layout`` (layout
     parameters), ``geojson`` (the text of a FeatureCollection of plot polygons) or
-    ``name`` (an example or a field file on the planner's host)."""
+    ``name`` (an example or a field file on the planner's host). ``scanner`` and
+    ``battery`` are the surveying robot's (its robot description)."""
 
     layout: FieldLayout | None = None
     geojson: str = ""
     name: str = ""
     scanner: ScannerModel = msgspec.field(default_factory=ScannerModel)
     options: PlanOptions = msgspec.field(default_factory=PlanOptions)
+    battery: Battery = msgspec.field(default_factory=Battery)

@@ -17,7 +17,8 @@ As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
   variance ``yaw_var`` (a magnetometer heading beside the motors);
 - publishes ``battery_state`` (sensor_msgs/BatteryState) from
   ``sim/device/battery``, as Clearpath's battery node does on
-  ``platform/bms/state``: the charge as a fraction and in Ah of the 24 V pack.
+  ``platform/bms/state``: the charge as a fraction and in Ah of the robot
+  description's pack.
 
 Stamps are on the service clock (the sim clock in a simulated deployment).
 The fault hook (``HuskySim.fault``; SIGUSR1 in the process, SIGUSR2 to undo) makes it
@@ -64,9 +65,6 @@ IMU_YAW_VAR = math.radians(5.0) ** 2
 # gyro (0.01 rad/s white, 0.005 rad/s bias); (0.1 m/s^2)^2 a UM7-class accelerometer.
 IMU_GYRO_VAR = 4e-4
 IMU_ACCEL_VAR = 1e-2
-
-# the Husky's pack: sealed lead acid, 24 V nominal (the user manual)
-PACK_V = 24.0
 
 
 class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -218,7 +216,8 @@ class HuskySim:
     def _on_battery(self, m: BatteryState) -> None:
         if not self.silent:
             pct, now = m.percentage, self.ctx.clock.now_ns()
-            ah = self.ctx.robot.battery.capacity_wh / PACK_V
+            spec = self.ctx.robot.battery
+            ah = spec.capacity_wh / spec.voltage_v
             self._battery_pub.put(ros.battery_state(now, pct, m.voltage, m.current, ah))
 
     def run(self, stop: threading.Event) -> None:

@@ -50,7 +50,7 @@ def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResul
     try:
         return ctx.bus.call(
             keys.PLANNER_PLAN,
-            PlanRequest(name=field, scanner=scanner_model(ctx.robot)),
+            PlanRequest(name=field, scanner=scanner_model(ctx.robot), battery=ctx.robot.battery),
             timeout=timeout,
         )
     except RpcError as exc:

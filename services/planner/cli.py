@@ -14,7 +14,7 @@ from common.cluster import ClusterError, add_cluster_arguments, cluster_of
 from common.config import ConfigError
 from common.field import FieldError
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
-from common.robot import load_robot, scanner_model
+from common.robot import load_robot
 from services.planner.outputs import write_all
 from services.planner.request import request_from_source
 
@@ -70,6 +70,23 @@ class ProgressBar:
         self.stream.flush()
 
 
+def survey_line(r: PlanResult) -> str:
+    """The survey's estimated time, its swaps and the assumptions it rests on."""
+    e, p = r.survey, r.options.pace
+    assert e is not None
+    swaps = f"{e.swaps} battery swap{'s' if e.swaps != 1 else ''}"
+    if e.swaps:
+        scans = [r.legs_scan_ids()[k] for k in e.swaps_before]
+        swaps += f" (before scans {', '.join(str(i) for i in scans)})"
+    line = (
+        f"about {e.time_s / 3600:.1f} h, {e.drive_m:.0f} m driven, {swaps}; at "
+        f"{p.speed:g} m/s and {p.location_s:g} s a location; {e.battery}"
+    )
+    if not e.feasible:
+        line += "; a location needs more than a full battery above the reserve"
+    return line
+
+
 def summary(r: PlanResult) -> str:
     c, t, v = r.cover, r.tour, r.visibility
     rows = [
@@ -96,6 +113,8 @@ def summary(r: PlanResult) -> str:
                 f"{t.length / t.bound - 1:.1%} of the shortest",
             )
         )
+    if r.survey is not None:
+        rows.append(("survey", survey_line(r)))
     if t.length_by_nav:
         rows.append(
             (
@@ -119,10 +138,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
         tour=args.tour,
     )
     try:
-        scanner = scanner_model(load_robot(args.robot))
+        robot = load_robot(args.robot)
         dask = bool(args.cluster or args.workers)
         # a Dask worker or a remote planner builds the field from the request alone
-        req = request_from_source(args.field, scanner, opts, inline=args.remote or dask)
+        req = request_from_source(args.field, robot, opts, inline=args.remote or dask)
     except (FieldError, ConfigError) as exc:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import numpy.typing as npt
 
+from common.battery import Battery
 from common.field import Field, FieldLayout, ScannerModel, build_field
 from common.messages.core import Array
 from common.messages.plan import (
@@ -21,6 +22,7 @@ from common.messages.plan import (
 )
 from services.planner.cover import Cover, exact_cover, greedy_cover
 from services.planner.route import NAV_MODES, Navigator
+from services.planner.swaps import survey_estimate, via_origin
 from services.planner.tsp import (
     HELD_KARP_MAX,
     held_karp,
@@ -59,13 +61,15 @@ def plan(
     progress: Progress | None = None,
     targets: npt.NDArray[np.bool_] | None = None,
     chunks: Chunks | None = None,
+    battery: Battery | None = None,
 ) -> PlanResult:
     """Plan a survey of ``layout`` (or of ``field`` when given, e.g. one loaded from
     GeoJSON). ``progress(done, total)`` follows the visibility stage. ``targets``: a
     flag per cell of the field, the cells to cover (None: all; e.g. no gaps in a
     measured crop); the others still occlude. ``chunks``: where the visibility's chunks
-    are cast (:func:`.visibility.compute_visibility`). Raises ValueError on inconsistent
-    options (such as a lane index outside the field)."""
+    are cast (:func:`.visibility.compute_visibility`). ``battery``: the robot's (default:
+    the Husky's), for the survey's swaps. Raises ValueError on inconsistent options
+    (such as a lane index outside the field)."""
     scanner = scanner or ScannerModel()
     opt = options or PlanOptions()
     timings: dict[str, float] = {}
@@ -136,6 +140,8 @@ def plan(
 
     t = time.perf_counter()
     legs = tour_legs(nav, pts, tour.order, ids)
+    via = via_origin(nav, pts[0], pts[1:], [int(i or 0) for i in ids[1:]])
+    survey = survey_estimate(legs, via, battery or Battery(), opt.pace)
     timings["legs"] = time.perf_counter() - t
 
     def as_ids(order: list[int]) -> list[int]:
@@ -177,4 +183,6 @@ def plan(
         legs=legs,
         timings=timings,
         cell_views=Array.of(np.asarray(every[sel].sum(axis=0), dtype=np.int64).ravel()),
+        via_origin=via,
+        survey=survey,
     )

@@ -12,12 +12,12 @@ from common.field import (
     Field,
     FieldError,
     FieldLayout,
-    ScannerModel,
     build_field,
     field_path,
     load_field,
 )
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
+from common.robot import Robot, scanner_model
 from services.planner.budget import PlanBudget, check
 from services.planner.core import plan
 from services.planner.visibility import Chunks, Progress
@@ -79,18 +79,30 @@ def compute(
     ``chunks``: where the visibility's chunks are cast (:mod:`.cluster`)."""
     layout, fld = resolve_field(req, allowed)
     check(fld, budget or PlanBudget(), req.scanner.max_range)
-    return plan(layout, req.scanner, req.options, field=fld, progress=progress, chunks=chunks)
+    return plan(
+        layout,
+        req.scanner,
+        req.options,
+        field=fld,
+        progress=progress,
+        chunks=chunks,
+        battery=req.battery,
+    )
 
 
 def request_from_source(
-    source: str, scanner: ScannerModel, options: PlanOptions, inline: bool
+    source: str, robot: Robot, options: PlanOptions, inline: bool
 ) -> PlanRequest:
-    """A request for a field named on the command line. With ``inline`` (a remote
-    planner), a local file is sent as its content, so the planner need not have it."""
+    """A request for a field named on the command line, surveyed by ``robot``. With
+    ``inline`` (a remote planner), a local file is sent as its content, so the planner
+    need not have it."""
     path = Path(source)
+    req = PlanRequest(
+        name=source, scanner=scanner_model(robot), battery=robot.battery, options=options
+    )
     if not inline or not path.exists():
-        return PlanRequest(name=source, scanner=scanner, options=options)
+        return req
     if path.suffix in (".geojson", ".json"):
-        return PlanRequest(geojson=path.read_text(), scanner=scanner, options=options)
+        return msgspec.structs.replace(req, name="", geojson=path.read_text())
     layout, _ = load_field(path)
-    return PlanRequest(layout=layout, scanner=scanner, options=options)
+    return msgspec.structs.replace(req, name="", layout=layout)

@@ -98,7 +98,11 @@ class PlannerService:
 
     def run(self, stop: threading.Event) -> None:
         if self.cfg.warm_up:  # loads numba's kernels and caches the deployment's plan
-            req = PlanRequest(name=self.ctx.field, scanner=scanner_model(self.ctx.robot))
+            req = PlanRequest(
+                name=self.ctx.field,
+                scanner=scanner_model(self.ctx.robot),
+                battery=self.ctx.robot.battery,
+            )
             threading.Thread(target=self._warm_up, args=(req,), daemon=True).start()
         stop.wait()
         self.pool.close()

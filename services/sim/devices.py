@@ -1,7 +1,7 @@
 """What the simulated devices sense, published each step of the world: encoders,
 the antennas' true positions (with the sky the crop hides), the IMU, the 2D lidar,
-and the true pose (for evaluation only). Faults change what the devices report,
-never the truth."""
+the battery's charge (1 Hz) and the true pose (for evaluation only). Faults change
+what the devices report, never the truth."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from common.messages.base import LaserScan
 from common.messages.core import Array
 from common.messages.sim import SimAntennas, SimEncoders, TruthPose
 from common.service import Context
+from services.sim.battery import SimBattery
 from services.sim.config import SimConfig
 from services.sim.faults import FaultSchedule, describe
 from services.sim.imu import ImuModel
@@ -25,9 +26,16 @@ from services.sim.world import World
 
 class Devices:
     def __init__(
-        self, ctx: Context, cfg: SimConfig, world: World, imu: ImuModel, faults: FaultSchedule
+        self,
+        ctx: Context,
+        cfg: SimConfig,
+        world: World,
+        imu: ImuModel,
+        faults: FaultSchedule,
+        battery: SimBattery,
     ) -> None:
         self.cfg, self.world, self.imu, self.faults = cfg, world, imu, faults
+        self.battery = battery
         self.log: logging.Logger = ctx.log
         bus = ctx.bus
         self.truth_pub = bus.publisher(keys.SIM_TRUTH)
@@ -35,6 +43,7 @@ class Devices:
         self.enc_pub = bus.publisher(keys.SIM_ENCODERS)
         self.lidar_pub = bus.publisher(keys.SIM_LIDAR)
         self.imu_pub = bus.publisher(keys.SIM_IMU)
+        self.battery_pub = bus.publisher(keys.SIM_BATTERY)
         angles = beam_angles(cfg.world.lidar)
         self._lidar_meta = (
             float(angles[0]),
@@ -78,6 +87,8 @@ class Devices:
                     blocked2=blocked[1],
                 )
             )
+        if self._every(1.0, k):
+            self.battery_pub.put(self.battery.message(t))
         if self.cfg.imu.enabled and self._every(self.cfg.imu.rate_hz, k):
             self.imu_pub.put(self.imu.read(t / NS, s))
         if self._every(self.cfg.truth_hz, k):

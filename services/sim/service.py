@@ -36,6 +36,7 @@ from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
 from services.sim.barrier import Barrier
+from services.sim.battery import SimBattery
 from services.sim.config import SimConfig
 from services.sim.devices import Devices
 from services.sim.faults import FaultSchedule
@@ -70,6 +71,7 @@ class SimService:
         except OSError as exc:  # a run folder we cannot write must not stop the world
             ctx.log.warning("cannot write the plants' truth: %s", exc)
         self.world_id = snapshot.fingerprint(layout, fld, cfg.world, ctx.robot)
+        self.battery = SimBattery(ctx.robot.battery, ctx.log)
         if cfg.resume:
             self._resume()
         self._lock = threading.Lock()  # held while stepping or rendering
@@ -77,8 +79,10 @@ class SimService:
         self._cmd_ns = -(10**18)
         bus = ctx.bus
         self.clock_pub = bus.publisher(keys.SIM_CLOCK)
-        self.devices = Devices(ctx, cfg, self.world, self.imu, self.faults)
+        self.devices = Devices(ctx, cfg, self.world, self.imu, self.faults, self.battery)
         bus.subscribe(keys.SIM_WHEELS, self._on_wheels)
+        # the operator who swaps the battery watches the mission
+        bus.subscribe(keys.MISSION_STATE, self.battery.on_mission)
         bus.serve(keys.SIM_RENDER, self.render)
         self.barrier: Barrier | None = None
         self._held = threading.Event()
@@ -102,6 +106,8 @@ class SimService:
             self.rng = np.random.default_rng(self.cfg.seed)
             return
         self.sim_ns = snap.sim_ns
+        charge = snap.robot.get(snapshot.BATTERY_KEY)
+        self.battery = SimBattery(self.ctx.robot.battery, self.ctx.log, charge)
         self.ctx.log.info(
             "continuing the world of %s from sim time %.1f s (saved %.1f s ago), robot at "
             "(%.2f, %.2f)",
@@ -117,7 +123,13 @@ class SimService:
         ``closed``: the simulator was told to stop, so there is nothing to continue."""
         with self._lock:
             snap = snapshot.take(
-                self.world_id, self.world.field.name, self.sim_ns, self.state, self.rng, closed
+                self.world_id,
+                self.world.field.name,
+                self.sim_ns,
+                self.state,
+                self.rng,
+                closed,
+                self.battery.charge_wh,
             )
         snapshot.save(self.snap_path, snap)
 
@@ -193,8 +205,12 @@ class SimService:
         c = self._cmd
         fresh = c is not None and self.sim_ns - self._cmd_ns <= self.cfg.motor_timeout_s * NS
         v, w = (c.v, c.w) if fresh and c is not None else (0.0, 0.0)
+        if self.battery.empty:  # no power, no drive
+            v = w = 0.0
         self.state = self.world.step_robot(self.state, v, w, dt, self.rng)
         self.sim_ns += int(dt * NS)
+        st = self.state
+        self.battery.step(dt, st.v_wheel, st.w_wheel, self.sim_ns)
 
     def run(self, stop: threading.Event) -> None:
         saver = None
@@ -207,6 +223,7 @@ class SimService:
             told = True  # the loop ends only when stop is set: SIGTERM, not a crash
         finally:
             stop.set()
+            self.ctx.log.info("%s", self.battery.summary())
             if saver is not None:
                 saver.join(timeout=2.0)
                 try:

@@ -60,6 +60,10 @@ class Snapshot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     closed: bool = False
 
 
+# the battery's charge (Wh) among the robot's state
+BATTERY_KEY = "battery_wh"
+
+
 def snapshot_path(run_dir: Path) -> Path:
     return run_dir / "sim" / "world.json"
 
@@ -102,8 +106,13 @@ def take(
     state: RobotState,
     rng: np.random.Generator,
     closed: bool = False,
+    battery_wh: float | None = None,
 ) -> Snapshot:
-    """The snapshot of a world at one instant (the caller holds the world still)."""
+    """The snapshot of a world at one instant (the caller holds the world still);
+    ``battery_wh``, the battery's charge, is kept with the robot's state."""
+    robot = dataclasses.asdict(state)
+    if battery_wh is not None:
+        robot[BATTERY_KEY] = battery_wh
     return Snapshot(
         closed=closed,
         world=world,
@@ -111,7 +120,7 @@ def take(
         field=field,
         sim_ns=sim_ns,
         wall_ns=time.time_ns(),
-        robot=dataclasses.asdict(state),
+        robot=robot,
         rng=json.dumps(rng.bit_generator.state),
     )
 
