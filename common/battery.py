@@ -85,11 +85,18 @@ def visit_wh(battery: Battery, pace: Pace, to_m: float, at_s: float, home_m: flo
 
 
 def must_swap(
-    charge_wh: float, battery: Battery, pace: Pace, to_m: float, at_s: float, home_m: float
+    charge_wh: float,
+    battery: Battery,
+    pace: Pace,
+    to_m: float,
+    at_s: float,
+    home_m: float,
+    ratio: float = 1.0,
 ) -> bool:
     """Whether a location must wait for a swap: with ``charge_wh`` left, the visit
-    (:func:`visit_wh`, times ``MARGIN``) would end with less than the reserve."""
-    need = MARGIN * visit_wh(battery, pace, to_m, at_s, home_m)
+    (:func:`visit_wh` times ``ratio``, what the survey has so far drawn against the
+    model's figure, and times ``MARGIN``) would end with less than the reserve."""
+    need = MARGIN * ratio * visit_wh(battery, pace, to_m, at_s, home_m)
     return charge_wh - need < battery.reserve_wh
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import math
 from typing import Annotated
 
 import msgspec
@@ -54,6 +55,22 @@ class Leg(msgspec.Struct, frozen=True, kw_only=True):
     y1: Coordinate
     final_yaw: Angle | None = None
     scan_id: int | None = None
+
+    @property
+    def length(self) -> float:
+        return math.hypot(self.x1 - self.x0, self.y1 - self.y0)
+
+
+def legs_length(legs: list[Leg]) -> float:
+    """Total driven length of ``legs`` in metres."""
+    return float(sum(g.length for g in legs))
+
+
+def round_trip_halves(legs: list[Leg]) -> tuple[list[Leg], list[Leg]]:
+    """A round trip from the Origin (a plan's ``via_origin``) cut at its location, the
+    leg that carries a scan id: (the way there, the way back)."""
+    k = next(i for i, g in enumerate(legs) if g.scan_id is not None)
+    return legs[: k + 1], legs[k + 1 :]
 
 
 class FollowRoute(msgspec.Struct, frozen=True, tag=True):

@@ -2,6 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.battery import Pace
 from common.messages.scan import ScanProfile
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
@@ -43,6 +44,16 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     ``traits_on_done``: then, when registration succeeded, compute the per-plot traits
     (``python -m services.traits RUN_DIR --manifest M``, the same way, with the
     manifest's ``[services.traits]`` options; see docs/traits.md).
+
+    The battery (:mod:`services.mission.battery`): before each location the charge
+    the base reports must cover it and the way back to the Origin, above the robot
+    description's reserve, or the robot goes to the Origin (within
+    ``origin_radius_m`` of it is there) and waits until the base reports at least
+    ``swapped_at`` of a full charge. With no battery state for ``battery_stale_s`` the
+    battery is not watched (said once in the mission log). ``pace``: the speed along
+    routes and the time at a location the plan's time and swaps are estimated with
+    (:class:`common.battery.Pace`); the swaps themselves follow what the battery
+    reports.
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)
@@ -69,3 +80,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     resume: bool = True
     register_on_done: bool = True
     traits_on_done: bool = True
+    battery_stale_s: Pos = 10.0
+    swapped_at: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.9
+    origin_radius_m: Pos = 2.0
+    pace: Pace = msgspec.field(default_factory=Pace)

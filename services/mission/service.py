@@ -28,6 +28,7 @@ from common.messages.mission import (
 from common.messages.plan import PlanResult
 from common.service import Context
 from common.transport import RequestError, RpcError
+from services.mission.battery import BatteryWatch
 from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted, Feeds
 from services.mission.log import MissionLog
@@ -171,7 +172,7 @@ class MissionService:
             raise
 
     def _start_planned(self, cmd: MissionStart) -> None:
-        plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s)
+        plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s, self.cfg.pace)
         name, log, segs = new_mission(self.ctx, plan, cmd.mission)
         self.plan = plan
         self._launch(name, log, segs)
@@ -234,7 +235,9 @@ class MissionService:
             # a resumed survey waits for the clock: every deadline is taken from it
             if not clock_started(self.ctx.clock, self._wake, self.ctx.log):
                 raise Aborted
-            walk(self, log, sv, self.cfg, segs, self._wake)
+            assert self.plan is not None
+            battery = BatteryWatch(self, sv, self.cfg, self.plan, self.ctx.robot.battery)
+            walk(self, log, sv, self.cfg, segs, self._wake, battery)
             home = [s for s in segs if s.cand_id is None]
             if self.cfg.return_to_origin and home:
                 self.phase, self.detail, self.current = MissionPhase.RETURNING, "to Origin", 0

@@ -15,9 +15,10 @@ import msgspec
 import numpy as np
 
 from common import keys
+from common.battery import Pace
 from common.field import FieldError, load_field
 from common.messages.mission import MissionStart
-from common.messages.plan import PlanRequest, PlanResult
+from common.messages.plan import PlanOptions, PlanRequest, PlanResult
 from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
@@ -26,8 +27,9 @@ from services.mission.plan import Segment, segments
 from services.mission.runfiles import write_run_files
 
 
-def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResult:
-    """The plan ``cmd`` asks for; RequestError naming the field at fault."""
+def requested_plan(ctx: Context, cmd: MissionStart, timeout: float, pace: Pace) -> PlanResult:
+    """The plan ``cmd`` asks for, at ``pace`` (its time and swaps); RequestError naming
+    the field at fault."""
     field = ctx.field
     if cmd.field and cmd.field != field and Path(cmd.field).resolve() != Path(field).resolve():
         # one field for the whole deployment: the simulated world, the planner and
@@ -50,7 +52,12 @@ def requested_plan(ctx: Context, cmd: MissionStart, timeout: float) -> PlanResul
     try:
         return ctx.bus.call(
             keys.PLANNER_PLAN,
-            PlanRequest(name=field, scanner=scanner_model(ctx.robot), battery=ctx.robot.battery),
+            PlanRequest(
+                name=field,
+                scanner=scanner_model(ctx.robot),
+                battery=ctx.robot.battery,
+                options=PlanOptions(pace=pace),
+            ),
             timeout=timeout,
         )
     except RpcError as exc:

@@ -32,6 +32,7 @@ from common.messages.nav import (
     NavState,
     PoseEstimate,
     RenewRoute,
+    legs_length,
 )
 from common.missionlog import Step
 from common.service import Context
@@ -67,6 +68,7 @@ class Survey:
         self.mission = mission
         self.wake, self.abort, self.paused = wake, abort, paused
         self.pose, self.progress, self.scanner = feeds.pose, feeds.progress, feeds.scanner
+        self.battery = feeds.battery
         self._lock = threading.Lock()
         self._collect: list[PoseEstimate] | None = None
         self._last_pose: PoseEstimate | None = None
@@ -146,7 +148,7 @@ class Survey:
     # --- driving ---
     def drive(self, seg: Segment, route_id: str) -> tuple[bool, str]:
         """Follow ``seg`` (joined where the robot stands); (arrived, why not)."""
-        length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in seg.legs)
+        length = legs_length(seg.legs)
         limit_ns = int((self.cfg.route_time_s + length / self.cfg.route_min_speed) * NS)
         why = ""
         for attempt in range(self.cfg.blocked_retries + 1):

@@ -1,6 +1,7 @@
 """The survey's walk through its locations, in tour order, as the mission log lists
 them: position, scan (with retries, each re-checking the pose) and record each one;
-a location a restart left mid-scan is taken from the scanner when it finished there.
+a location a restart left mid-scan is taken from the scanner when it finished there;
+the battery is looked at before each drive (:mod:`.battery`).
 The mission service (:mod:`.service`) runs it on its worker thread and owns the
 phase, the events and what happens before and after."""
 
@@ -14,6 +15,7 @@ import msgspec
 
 from common.clock import Clock
 from common.messages.mission import MissionPhase
+from services.mission.battery import BatteryWatch
 from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted
 from services.mission.log import MissionLog
@@ -37,9 +39,11 @@ def walk(
     cfg: MissionConfig,
     segs: list[Segment],
     wake: threading.Event,
+    battery: BatteryWatch | None = None,
 ) -> None:
     """Every location not finished yet; raises Aborted when ``wake`` is set before a
-    location is begun."""
+    location is begun. ``battery`` sees every location before the robot drives to it
+    (and may send the robot for a swap first)."""
     by_cand = {s.cand_id: s for s in segs if s.cand_id is not None}
     for step in log.steps():
         if step.status in ("done", "failed", "skipped"):
@@ -55,7 +59,10 @@ def walk(
                 continue
             # whatever the scanner holds for it is not taken after another restart
             log.update(step.idx, status="driving")
-        visit(host, log, sv, cfg, step.idx, by_cand[step.cand_id], tag)
+        seg = by_cand[step.cand_id]
+        if battery is not None and log.steps()[step.idx].status in ("pending", "driving"):
+            seg = battery.before(step, seg)
+        visit(host, log, sv, cfg, step.idx, seg, tag)
 
 
 def visit(

@@ -8,9 +8,9 @@ import numpy as np
 import numpy.typing as npt
 
 from common.battery import Battery, Estimate, Pace, Visit, estimate
-from common.messages.nav import Leg
+from common.messages.nav import Leg, legs_length, round_trip_halves
 from services.planner.route import Navigator
-from services.planner.waypoints import legs_length, tour_legs
+from services.planner.waypoints import tour_legs
 
 F64 = npt.NDArray[np.float64]
 
@@ -24,12 +24,6 @@ def via_origin(nav: Navigator, origin: F64, xy: F64, ids: list[int]) -> dict[int
     return out
 
 
-def split(legs: list[Leg]) -> tuple[list[Leg], list[Leg]]:
-    """A round trip cut where its location is: (the way there, the way back)."""
-    k = next(i for i, g in enumerate(legs) if g.scan_id is not None)
-    return legs[: k + 1], legs[k + 1 :]
-
-
 def survey_estimate(
     legs: list[Leg], via: dict[int, list[Leg]], battery: Battery, pace: Pace
 ) -> Estimate:
@@ -39,7 +33,7 @@ def survey_estimate(
     for g in legs:
         run.append(g)
         if g.scan_id is not None:
-            there, back = split(via[g.scan_id])
+            there, back = round_trip_halves(via[g.scan_id])
             visits.append(Visit(legs_length(run), legs_length(there), legs_length(back)))
             run = []
     return estimate(visits, legs_length(run), battery, pace)

@@ -60,8 +60,3 @@ def tour_legs(nav: Navigator, pts: F64, order: list[int], scan_ids: list[int | N
         nxt = None if sid is not None else next((y for y in yaws[k + 1 :] if y is not None), None)
         legs.append(Leg(x0=x0, y0=y0, x1=x1, y1=y1, final_yaw=nxt, scan_id=sid))
     return legs
-
-
-def legs_length(legs: list[Leg]) -> float:
-    """Total driven length of ``legs`` in metres."""
-    return float(sum(math.hypot(g.x1 - g.x0, g.y1 - g.y0) for g in legs))

@@ -61,10 +61,13 @@ def run_sim(
     extra: str = "",
     follower: str = "",
     field: Path | None = None,
+    robot: Path | None = None,
+    scan_s: float = 20.0,
 ) -> tuple[int, str, Path]:
     """``phenorover sim --field mini.geojson`` (or ``field``) on a fast deployment;
     ``sim``: lines of the simulator's section, ``extra``: after the mission's,
-    ``follower``: the route follower's. Exit code, output, runs."""
+    ``follower``: the route follower's; ``robot``: a robot description file;
+    ``scan_s``: sim seconds a scan takes. Exit code, output, runs."""
     if field is None:
         field = tmp / "mini.geojson"
         field.write_text(json.dumps(mini_geojson()))
@@ -75,6 +78,7 @@ def run_sim(
 clock = "sim"
 field = "engr"
 run_dir = "{runs}"
+{f'robot = "{robot}"' if robot else ""}
 [zenoh]
 listen = ["tcp/127.0.0.1:{free_port()}"]
 [services.sim]
@@ -94,7 +98,7 @@ watchdog_s = 1.0
 [services.scanner]
 backend = "sim"
 storage_dir = "{tmp / "card"}"
-sim_scan_time_s = 20.0
+sim_scan_time_s = {scan_s}
 render_step_deg = 1.0
 status_timeout_s = 40.0
 [services.nav]

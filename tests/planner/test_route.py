@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from common.field import load_field
+from common.messages.nav import legs_length
 from services.planner.route import Navigator, aha_distance, br_distance
 from services.planner.tsp import (
     circuit_cpsat,
@@ -19,7 +20,7 @@ from services.planner.tsp import (
     solve_tour,
     tour_length,
 )
-from services.planner.waypoints import heading, legs_length, tour_legs
+from services.planner.waypoints import heading, tour_legs
 
 PAPER_ENGR_ROUTE = [14, 26, 4, 17, 30, 65, 43, 74, 60, 39, 55]
 
