@@ -27,7 +27,7 @@ import rerun as rr
 
 from common.field import Field
 from common.geo import FieldFrame
-from common.messages.base import LaserScan
+from common.messages.base import BatteryState, LaserScan
 from common.messages.gnss import FixType, GnssHeading, NavSatFix
 from common.messages.mission import MissionEvent, MissionState
 from common.messages.nav import NavProgress
@@ -257,6 +257,11 @@ def progress_entries(p: NavProgress) -> list[Entry]:
         Entry("errors/cross_track_m", rr.Scalars(p.cross_track)),
         Entry("errors/heading_deg", rr.Scalars(math.degrees(p.heading_error))),
     ]
+
+
+def battery_entry(b: BatteryState) -> Entry:
+    """The charge the base reports, in percent, as a time series."""
+    return Entry("robot/battery_pct", rr.Scalars(100.0 * b.percentage))
 
 
 def state_entries(prev: MissionState | None, s: MissionState) -> list[Entry]:

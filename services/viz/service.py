@@ -50,6 +50,7 @@ LATEST: dict[str, Topic[Any]] = {
     "heading": keys.GNSS_HEADING,
     "lidar": keys.BASE_SCAN,
     "scanner": keys.SCANNER_STATUS,
+    "battery": keys.BASE_BATTERY,
     "state": keys.MISSION_STATE,
     "plan": keys.MISSION_PLAN,
 }
@@ -187,6 +188,8 @@ class VizService:
             log(m.stamp_ns, [scene.heading_entry(m, self._last_pose.x, self._last_pose.y)])
         elif name == "lidar":
             log(m.stamp_ns, [scene.lidar_entry(m, self.ctx.robot.lidar)])
+        elif name == "battery":
+            log(m.stamp_ns, [scene.battery_entry(m)])
         elif name == "scanner":
             log(m.stamp_ns, scene.scanner_entries(self.scanner, m))
             self.scanner = m
