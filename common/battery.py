@@ -19,6 +19,8 @@ from typing import Annotated
 
 import msgspec
 
+from common.messages.core import NonNegative
+
 Energy = Annotated[float, msgspec.Meta(gt=0.0, le=1e6)]  # Wh
 Power = Annotated[float, msgspec.Meta(ge=0.0, le=1e5)]  # W
 Seconds = Annotated[float, msgspec.Meta(ge=0.0, le=1e6)]
@@ -118,9 +120,9 @@ class Estimate(msgspec.Struct, frozen=True, kw_only=True):
     included; ``energy_wh``: drawn in all; ``feasible``: every location fits in one
     full battery (else the survey would run below its reserve)."""
 
-    time_s: float
-    drive_m: float
-    energy_wh: float
+    time_s: NonNegative
+    drive_m: NonNegative
+    energy_wh: NonNegative
     swaps_before: list[int]
     feasible: bool
     battery: str

@@ -6,6 +6,7 @@ finite value the field allows round-trips."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -19,13 +20,20 @@ from common import keys
 from common.codec import decode
 from common.messages.core import FINITE_MAX, Finite
 
-Path = tuple[str | int, ...]
 
-
-class DictKey(str):
+@dataclasses.dataclass(frozen=True)
+class DictKey:
     """A dict key in a path (msgspec names its place ``[...]`` in errors)."""
 
-    __slots__ = ()
+    key: Any
+
+
+Path = tuple[str | int | DictKey, ...]
+
+
+def _key_example(t: mi.Type) -> Any:
+    k = example(t)
+    return "k" if k is None or k == "" else k
 
 
 NON_FINITE = (math.nan, math.inf, -math.inf)
@@ -90,7 +98,7 @@ def example(t: mi.Type) -> Any:
     if isinstance(t, mi.TupleType):
         return [example(i) for i in t.item_types]
     if isinstance(t, mi.DictType):
-        return {example(t.key_type) or "k": example(t.value_type)}
+        return {_key_example(t.key_type): example(t.value_type)}
     if isinstance(t, mi.UnionType):
         return example(next(u for u in t.types if not isinstance(u, mi.NoneType)))
     if isinstance(t, mi.StructType):
@@ -110,7 +118,7 @@ def float_paths(t: mi.Type, path: Path = ()) -> list[tuple[Path, mi.FloatType]]:
     if isinstance(t, mi.TupleType):
         return [p for i, it in enumerate(t.item_types) for p in float_paths(it, (*path, i))]
     if isinstance(t, mi.DictType):
-        return float_paths(t.value_type, (*path, DictKey(example(t.key_type) or "k")))
+        return float_paths(t.value_type, (*path, DictKey(_key_example(t.key_type))))
     if isinstance(t, mi.UnionType):
         inner = [u for u in t.types if not isinstance(u, mi.NoneType)]
         return float_paths(inner[0], path) if inner else []
@@ -123,6 +131,8 @@ def with_value(obj: Any, path: Path, value: float) -> Any:
     if not path:
         return value
     head, rest = path[0], path[1:]
+    if isinstance(head, DictKey):
+        return {**obj, head.key: with_value(obj[head.key], rest, value)}
     if isinstance(obj, list):
         out = list(obj)
         assert isinstance(head, int)
@@ -133,7 +143,7 @@ def with_value(obj: Any, path: Path, value: float) -> Any:
 
 def value_at(obj: Any, path: Path) -> Any:
     for p in path:
-        obj = obj[p]
+        obj = obj[p.key] if isinstance(p, DictKey) else obj[p]
     return obj
 
 
