@@ -31,7 +31,8 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     (or sample points) a candidate needs on a cell to count as seeing it.
     ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``. ``pace``: how fast the
     survey goes, for its time estimate and the swaps it foretells
-    (:class:`common.battery.Pace`).
+    (:class:`common.battery.Pace`). ``robots``: how many robots share the survey
+    (the locations split between them, :mod:`services.planner.fleet`).
     """
 
     nav: Literal["br", "aha", "lanes"] = "aha"
@@ -47,6 +48,7 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     open_rows: list[int] | None = None
     open_cross: list[int] | None = None
     pace: Pace = msgspec.field(default_factory=Pace)
+    robots: Annotated[int, msgspec.Meta(ge=1, le=8)] = 1
 
 
 class Candidate(msgspec.Struct, frozen=True, kw_only=True):
@@ -106,6 +108,32 @@ class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
     time_s: NonNegative
 
 
+class FleetPart(msgspec.Struct, frozen=True, kw_only=True):
+    """One robot's share of a survey: ``order`` its tour (candidate ids, 0 the Origin
+    first and last), ``legs`` the legs of it, ``survey`` its time with its swaps."""
+
+    robot: Annotated[int, msgspec.Meta(ge=1)]
+    order: list[int]
+    legs: list[Leg]
+    survey: Estimate
+
+
+class Fleet(msgspec.Struct, frozen=True, kw_only=True):
+    """The locations split between robots so that the slowest finishes first:
+    ``parts`` one per robot; ``one_robot_s``: the survey's time with one robot (the
+    plan's own tour, the same pace and battery), to compare; ``status`` of the split
+    (``heuristic``: guided local search to its time limit); ``time_s`` it took."""
+
+    parts: list[FleetPart]
+    one_robot_s: NonNegative
+    status: str
+    time_s: NonNegative
+
+    @property
+    def makespan_s(self) -> float:
+        return max(p.survey.time_s for p in self.parts)
+
+
 class PlanResult(Message, frozen=True, kw_only=True):
     """Everything a survey needs, plus what it took to get it. ``plot_boxes`` is the
     (P, 6) float64 array of plot boxes; ``origin`` the tour start (x, y);
@@ -117,7 +145,8 @@ class PlanResult(Message, frozen=True, kw_only=True):
     ``via_origin``: each selected location's round trip from the Origin along the
     lanes (the way a robot leaves for a battery swap and comes back); ``survey``: the
     survey's time and energy at the options' pace, with the swaps the request's
-    battery asks for (:func:`common.battery.estimate`)."""
+    battery asks for (:func:`common.battery.estimate`); ``fleet``: with several
+    robots, each one's share."""
 
     field: str
     layout: FieldLayout
@@ -136,6 +165,7 @@ class PlanResult(Message, frozen=True, kw_only=True):
     footprints: Array | None = None
     via_origin: dict[int, list[Leg]] | None = None
     survey: Estimate | None = None
+    fleet: Fleet | None = None
 
     def legs_scan_ids(self) -> list[int]:
         """The scan ids in tour order (the legs that end at a location)."""

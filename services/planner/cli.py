@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 from typing import TextIO
 
+from common.battery import Pace
 from common.cluster import ClusterError, add_cluster_arguments, cluster_of
 from common.config import ConfigError
 from common.field import FieldError
@@ -28,6 +29,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--coverage", type=float, default=1.0, help="fraction of coverable cells")
     p.add_argument("--min-hits", type=int, default=1)
     p.add_argument("--tour", choices=["auto", "held-karp", "cp-sat", "gls"], default="auto")
+    p.add_argument(
+        "--robots", type=int, default=1, help="robots sharing the survey (the slowest first)"
+    )
+    p.add_argument(
+        "--speed", type=float, default=None, help="m/s along routes, for the survey's time"
+    )
+    p.add_argument(
+        "--location-s", type=float, default=None, help="seconds at a location, for its time"
+    )
     p.add_argument("--out", type=Path, default=None, help="output folder (runs/plan-FIELD)")
     p.add_argument(
         "--robot", default="", help="robot description: its scanner height (default: Husky)"
@@ -87,6 +97,32 @@ def survey_line(r: PlanResult) -> str:
     return line
 
 
+def fleet_rows(r: PlanResult) -> list[tuple[str, str]]:
+    """Each robot's share, and the slowest against one robot alone."""
+    f = r.fleet
+    assert f is not None
+    rows = []
+    for part in f.parts:
+        e = part.survey
+        n = len(part.order) - 2
+        rows.append(
+            (
+                f"robot {part.robot}",
+                f"{n} locations, about {e.time_s / 3600:.1f} h, {e.drive_m:.0f} m, "
+                f"{e.swaps} swaps: " + "-".join("Origin" if i == 0 else str(i) for i in part.order),
+            )
+        )
+    rows.append(
+        (
+            "robots",
+            f"{len(f.parts)}: the slowest about {f.makespan_s / 3600:.1f} h, "
+            f"{f.makespan_s / f.one_robot_s:.2f} x one robot ({f.one_robot_s / 3600:.1f} h); "
+            f"split {f.status} in {f.time_s:.1f} s",
+        )
+    )
+    return rows
+
+
 def summary(r: PlanResult) -> str:
     c, t, v = r.cover, r.tour, r.visibility
     rows = [
@@ -115,6 +151,8 @@ def summary(r: PlanResult) -> str:
         )
     if r.survey is not None:
         rows.append(("survey", survey_line(r)))
+    if r.fleet is not None:
+        rows.extend(fleet_rows(r))
     if t.length_by_nav:
         rows.append(
             (
@@ -136,6 +174,11 @@ def cmd_plan(args: argparse.Namespace) -> int:
         coverage_target=args.coverage,
         min_hits=args.min_hits,
         tour=args.tour,
+        robots=args.robots,
+        pace=Pace(
+            speed=args.speed or Pace().speed,
+            location_s=Pace().location_s if args.location_s is None else args.location_s,
+        ),
     )
     try:
         robot = load_robot(args.robot)

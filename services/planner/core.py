@@ -21,6 +21,7 @@ from common.messages.plan import (
     VisibilitySummary,
 )
 from services.planner.cover import Cover, exact_cover, greedy_cover
+from services.planner.fleet import fleet
 from services.planner.route import NAV_MODES, Navigator
 from services.planner.swaps import survey_estimate, via_origin
 from services.planner.tsp import (
@@ -143,6 +144,11 @@ def plan(
     via = via_origin(nav, pts[0], pts[1:], [int(i or 0) for i in ids[1:]])
     survey = survey_estimate(legs, via, battery or Battery(), opt.pace)
     timings["legs"] = time.perf_counter() - t
+    shares = None
+    if opt.robots > 1:
+        t = time.perf_counter()
+        shares = fleet(nav, pts, ids, dist, via, battery or Battery(), opt, survey.time_s)
+        timings["fleet"] = time.perf_counter() - t
 
     def as_ids(order: list[int]) -> list[int]:
         return [0 if k == 0 else int(ids[k] or 0) for k in order] + [0]
@@ -185,4 +191,5 @@ def plan(
         cell_views=Array.of(np.asarray(every[sel].sum(axis=0), dtype=np.int64).ravel()),
         via_origin=via,
         survey=survey,
+        fleet=shares,
     )

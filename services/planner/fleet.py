@@ -1,0 +1,138 @@
+"""The chosen locations split between several robots so that the slowest finishes
+first: OR-Tools routing with one vehicle per robot, all leaving from and returning to
+the Origin, on a time dimension (the lane distance at the survey's pace, plus each
+location's time) whose global span is the cost to minimise. Pure.
+
+The split balances time, not distance: a location costs its positioning and scan
+whoever takes it, so a robot with the far locations takes fewer of them."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+
+import numpy as np
+import numpy.typing as npt
+from ortools.constraint_solver import pywrapcp, routing_enums_pb2
+
+from common.battery import Battery, Pace
+from common.messages.nav import Leg
+from common.messages.plan import Fleet, FleetPart, PlanOptions
+from services.planner.route import Navigator
+from services.planner.swaps import survey_estimate
+from services.planner.waypoints import tour_legs
+
+F64 = npt.NDArray[np.float64]
+# routing works in integers: deciseconds
+_SCALE = 10.0
+# the weight of the span (the slowest robot's time) against the sum of times: large, so
+# the span comes first and the total breaks its ties
+SPAN_WEIGHT = 100
+
+
+@dataclasses.dataclass(frozen=True)
+class Split:
+    """``orders[r]``: robot r's tour as node indices (0, the Origin, first);
+    ``times_s[r]``: its time at ``pace``; ``status``: ``heuristic`` (guided local
+    search to its time limit) or ``trivial``."""
+
+    orders: list[list[int]]
+    times_s: list[float]
+    status: str
+    time_s: float
+
+    @property
+    def makespan_s(self) -> float:
+        return max(self.times_s)
+
+
+def tour_time(d: F64, order: list[int], pace: Pace) -> float:
+    """The closed tour ``order`` (from node 0 and back) at ``pace``."""
+    stops = [*order, order[0]]
+    metres = sum(float(d[a, b]) for a, b in itertools.pairwise(stops))
+    return pace.drive_s(metres) + pace.location_s * (len(order) - 1)
+
+
+def split_tours(d: F64, robots: int, pace: Pace, time_limit_s: float = 10.0) -> Split:
+    """Tours of ``robots`` robots over the nodes of ``d`` (node 0 the Origin, every
+    other node a location visited by exactly one robot) minimising the slowest one's
+    time. Raises ValueError when there are more robots than locations."""
+    t0 = time.perf_counter()
+    n = d.shape[0]
+    if robots < 1 or robots > n - 1:
+        raise ValueError(f"{robots} robots for {n - 1} locations: at most one robot a location")
+    if robots == 1 or n <= 2:
+        order = list(range(n))
+        return Split([order], [tour_time(d, order, pace)], "trivial", time.perf_counter() - t0)
+    at = np.full(n, pace.location_s)
+    at[0] = 0.0
+    # the time of an arc: the drive, then the location's time at its end
+    cost = np.rint((d / pace.speed + at[None, :]) * _SCALE).astype(np.int64).tolist()
+    manager = pywrapcp.RoutingIndexManager(n, robots, 0)
+    routing = pywrapcp.RoutingModel(manager)
+    cb = routing.RegisterTransitMatrix(cost)
+    routing.SetArcCostEvaluatorOfAllVehicles(cb)
+    horizon = int(sum(max(row) for row in cost)) + 1
+    routing.AddDimension(cb, 0, horizon, True, "time")
+    routing.GetDimensionOrDie("time").SetGlobalSpanCostCoefficient(SPAN_WEIGHT)
+    params = pywrapcp.DefaultRoutingSearchParameters()
+    params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
+    params.local_search_metaheuristic = (
+        routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
+    )
+    params.time_limit.FromMilliseconds(max(1, int(time_limit_s * 1000)))
+    sol = routing.SolveWithParameters(params)
+    if sol is None:
+        raise RuntimeError(f"OR-Tools routing split no tours for {robots} robots")
+    orders: list[list[int]] = []
+    for r in range(robots):
+        idx, order = routing.Start(r), []
+        while not routing.IsEnd(idx):
+            order.append(manager.IndexToNode(idx))
+            idx = sol.Value(routing.NextVar(idx))
+        orders.append(order)
+    times = [tour_time(d, o, pace) if len(o) > 1 else 0.0 for o in orders]
+    return Split(orders, times, "heuristic", time.perf_counter() - t0)
+
+
+def check_lanes(xs: F64, robots: int) -> None:
+    """Refuse more robots than the cross lanes the locations are in (``xs``, their x):
+    two robots working one lane would wait on each other all survey long."""
+    lanes = len(np.unique(np.round(xs, 3)))
+    if robots > lanes:
+        raise ValueError(
+            f"PlanOptions.robots: {robots} robots for the {lanes} lanes the locations are "
+            "in; at most one robot a lane"
+        )
+
+
+def fleet(
+    nav: Navigator,
+    pts: F64,
+    ids: list[int | None],
+    dist: F64,
+    via: dict[int, list[Leg]],
+    battery: Battery,
+    opt: PlanOptions,
+    one_robot_s: float,
+) -> Fleet:
+    """The survey of ``pts`` (the Origin first) split between ``opt.robots`` robots,
+    each part's legs and time with its swaps."""
+    check_lanes(pts[1:, 0], opt.robots)
+    # guided local search runs to its limit, however small the problem: a second and a
+    # tenth of a second a location, at most the tour's own limit
+    limit = min(opt.tour_time_limit_s, 1.0 + 0.1 * (len(pts) - 1))
+    split = split_tours(dist, opt.robots, opt.pace, limit)
+    parts = []
+    for r, order in enumerate(split.orders):
+        legs = tour_legs(nav, pts, order, ids) if len(order) > 1 else []
+        parts.append(
+            FleetPart(
+                robot=r + 1,
+                order=[0 if k == 0 else int(ids[k] or 0) for k in order] + [0],
+                legs=legs,
+                survey=survey_estimate(legs, via, battery, opt.pace),
+            )
+        )
+    return Fleet(parts=parts, one_robot_s=one_robot_s, status=split.status, time_s=split.time_s)

@@ -1,0 +1,58 @@
+"""Locations split between robots so that the slowest finishes first."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common.battery import Pace
+from common.messages.plan import PlanOptions
+from phenorover.eval.fields import engr_sized
+from services.planner.core import plan
+from services.planner.fleet import check_lanes, split_tours, tour_time
+
+PACE = Pace(speed=0.5, location_s=300.0)
+
+
+def line(n: int, step: float = 10.0) -> np.ndarray:
+    """Distances between the Origin and ``n`` locations along one line."""
+    x = np.arange(n + 1) * step
+    return np.abs(x[:, None] - x[None, :])
+
+
+def test_two_robots_share_the_locations_and_the_slowest_is_balanced() -> None:
+    d = line(12)
+    one = split_tours(d, 1, PACE)
+    two = split_tours(d, 2, PACE, time_limit_s=1.0)
+    visited = sorted(k for o in two.orders for k in o if k != 0)
+    assert visited == list(range(1, 13))  # every location once
+    assert all(o[0] == 0 for o in two.orders)
+    assert one.makespan_s == pytest.approx(tour_time(d, list(range(13)), PACE))
+    # twelve locations of 300 s: no robot can do better than six of them
+    assert two.makespan_s >= 6 * 300.0
+    assert two.makespan_s <= 0.6 * one.makespan_s
+    assert abs(two.times_s[0] - two.times_s[1]) <= 300.0 + 2 * 120.0 / 0.5
+
+
+def test_more_robots_than_locations_or_lanes_is_one_line() -> None:
+    with pytest.raises(ValueError, match="3 robots for 2 locations"):
+        split_tours(line(2), 3, PACE)
+    with pytest.raises(ValueError, match=r"3 robots for the 2 lanes the locations are in"):
+        check_lanes(np.array([1.0, 1.0, 5.0]), 3)
+
+
+def test_a_field_of_600_plots_for_two_robots() -> None:
+    layout = engr_sized(20, 30, "f600")
+    opt = PlanOptions(
+        robots=2, cover="greedy", tour_time_limit_s=2.0, pace=Pace(speed=0.3, location_s=300.0)
+    )
+    r = plan(layout, options=opt)
+    assert r.fleet is not None and len(r.fleet.parts) == 2
+    taken = sorted(i for p in r.fleet.parts for i in p.order if i != 0)
+    assert taken == sorted(r.selected)
+    for p in r.fleet.parts:
+        assert [g.scan_id for g in p.legs if g.scan_id is not None] == p.order[1:-1]
+        assert (p.legs[0].x0, p.legs[0].y0) == pytest.approx(r.origin)
+        assert (p.legs[-1].x1, p.legs[-1].y1) == pytest.approx(r.origin)
+    assert r.survey is not None and r.fleet.one_robot_s == r.survey.time_s
+    assert r.fleet.makespan_s <= 0.6 * r.fleet.one_robot_s
