@@ -42,6 +42,7 @@ class BatteryWatch:
         self.swaps = 0
         self._visit: tuple[float, float] | None = None  # (charge at its start, model Wh)
         self._unwatched = ""
+        self._since = sv.now()  # a base silent this long after it is not watched
 
     def _charge_wh(self) -> float | None:
         """The charge the base reports (Wh), or None when it reports none lately."""
@@ -65,7 +66,9 @@ class BatteryWatch:
             return seg
         charge = self._charge_wh()
         if charge is None:
-            self._unwatch(f"no battery state from the base for {self.cfg.battery_stale_s:g} s")
+            # the first report may still be on its way when a survey begins
+            if self.sv.now() - self._since >= self.cfg.battery_stale_s * NS:
+                self._unwatch(f"no battery state from the base for {self.cfg.battery_stale_s:g} s")
             return seg
         self._unwatched = ""
         self._learn(charge)

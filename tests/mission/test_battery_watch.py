@@ -136,8 +136,11 @@ def test_at_the_origin_a_low_battery_waits_there(engr: PlanResult) -> None:
 def test_without_battery_state_or_round_trips_the_battery_is_not_watched(
     engr: PlanResult,
 ) -> None:
-    w, _sv, host = watch(engr)
+    w, sv, host = watch(engr)
     seg = segments(engr)[1]
+    assert w.before(step_of(seg, 1), seg) is seg
+    assert host.events == []  # the first report may be on its way yet
+    sv.t += 10 * NS
     assert w.before(step_of(seg, 1), seg) is seg
     assert w.before(step_of(seg, 1), seg) is seg
     assert host.events == [
