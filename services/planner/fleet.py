@@ -14,13 +14,14 @@ import time
 
 import numpy as np
 import numpy.typing as npt
-from ortools.constraint_solver import pywrapcp, routing_enums_pb2
+from ortools.constraint_solver import pywrapcp
 
 from common.battery import Battery, Pace
 from common.messages.nav import Leg
 from common.messages.plan import Fleet, FleetPart, PlanOptions
 from services.planner.route import Navigator
 from services.planner.swaps import survey_estimate
+from services.planner.tsp import gls_parameters
 from services.planner.waypoints import tour_legs
 
 F64 = npt.NDArray[np.float64]
@@ -76,13 +77,7 @@ def split_tours(d: F64, robots: int, pace: Pace, time_limit_s: float = 10.0) -> 
     horizon = int(sum(max(row) for row in cost)) + 1
     routing.AddDimension(cb, 0, horizon, True, "time")
     routing.GetDimensionOrDie("time").SetGlobalSpanCostCoefficient(SPAN_WEIGHT)
-    params = pywrapcp.DefaultRoutingSearchParameters()
-    params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
-    params.local_search_metaheuristic = (
-        routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
-    )
-    params.time_limit.FromMilliseconds(max(1, int(time_limit_s * 1000)))
-    sol = routing.SolveWithParameters(params)
+    sol = routing.SolveWithParameters(gls_parameters(time_limit_s))
     if sol is None:
         raise RuntimeError(f"OR-Tools routing split no tours for {robots} robots")
     orders: list[list[int]] = []

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from typing import Any
 
 import numba as nb
 import numpy as np
@@ -163,6 +164,18 @@ def circuit_cpsat(
     return Tour(order, tour_length(d, order), "cp-sat-circuit", status, time.perf_counter() - t0)
 
 
+def gls_parameters(time_limit_s: float) -> Any:
+    """OR-Tools routing's search: the cheapest arc first, then guided local search
+    until ``time_limit_s`` (it runs to the limit, however small the problem)."""
+    params = pywrapcp.DefaultRoutingSearchParameters()
+    params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
+    params.local_search_metaheuristic = (
+        routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
+    )
+    params.time_limit.FromMilliseconds(max(1, int(time_limit_s * 1000)))
+    return params
+
+
 def guided_local_search(d: F64, time_limit_s: float = 10.0) -> Tour:
     """OR-Tools routing: PATH_CHEAPEST_ARC then GUIDED_LOCAL_SEARCH until the limit."""
     t0 = time.perf_counter()
@@ -176,13 +189,7 @@ def guided_local_search(d: F64, time_limit_s: float = 10.0) -> Tour:
     routing = pywrapcp.RoutingModel(manager)
     cb = routing.RegisterTransitMatrix(cost)
     routing.SetArcCostEvaluatorOfAllVehicles(cb)
-    params = pywrapcp.DefaultRoutingSearchParameters()
-    params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
-    params.local_search_metaheuristic = (
-        routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
-    )
-    params.time_limit.FromMilliseconds(max(1, int(time_limit_s * 1000)))
-    sol = routing.SolveWithParameters(params)
+    sol = routing.SolveWithParameters(gls_parameters(time_limit_s))
     if sol is None:
         raise RuntimeError(f"OR-Tools routing found no tour of {n} nodes")
     order: list[int] = []
