@@ -91,14 +91,14 @@ def split_tours(d: F64, robots: int, pace: Pace, time_limit_s: float = 10.0) -> 
     return Split(orders, times, "heuristic", time.perf_counter() - t0)
 
 
-def check_lanes(xs: F64, robots: int) -> None:
-    """Refuse more robots than the cross lanes the locations are in (``xs``, their x):
-    two robots working one lane would wait on each other all survey long."""
-    lanes = len(np.unique(np.round(xs, 3)))
+def check_lanes(nav: Navigator, robots: int) -> None:
+    """Refuse more robots than the field has lanes (its row-gap and cross lanes): with
+    fewer, some would stand in another's lane whatever the split."""
+    lanes = len(nav.xs) + len(nav.ys)
     if robots > lanes:
         raise ValueError(
-            f"PlanOptions.robots: {robots} robots for the {lanes} lanes the locations are "
-            "in; at most one robot a lane"
+            f"PlanOptions.robots: {robots} robots for a field of {lanes} lanes; at most "
+            "one robot a lane"
         )
 
 
@@ -114,7 +114,7 @@ def fleet(
 ) -> Fleet:
     """The survey of ``pts`` (the Origin first) split between ``opt.robots`` robots,
     each part's legs and time with its swaps."""
-    check_lanes(pts[1:, 0], opt.robots)
+    check_lanes(nav, opt.robots)
     # guided local search runs to its limit, however small the problem: a second and a
     # tenth of a second a location, at most the tour's own limit
     limit = min(opt.tour_time_limit_s, 1.0 + 0.1 * (len(pts) - 1))

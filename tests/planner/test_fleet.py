@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from common.battery import Pace
+from common.field import load_field
 from common.messages.plan import PlanOptions
 from phenorover.eval.fields import engr_sized
 from services.planner.core import plan
 from services.planner.fleet import check_lanes, split_tours, tour_time
+from services.planner.route import Navigator
 
 PACE = Pace(speed=0.5, location_s=300.0)
 
@@ -37,8 +39,12 @@ def test_two_robots_share_the_locations_and_the_slowest_is_balanced() -> None:
 def test_more_robots_than_locations_or_lanes_is_one_line() -> None:
     with pytest.raises(ValueError, match="3 robots for 2 locations"):
         split_tours(line(2), 3, PACE)
-    with pytest.raises(ValueError, match=r"3 robots for the 2 lanes the locations are in"):
-        check_lanes(np.array([1.0, 1.0, 5.0]), 3)
+    _, fld = load_field("engr")
+    nav = Navigator(fld)
+    lanes = len(fld.cross_lanes_x) + len(fld.row_lanes_y)
+    check_lanes(nav, lanes)
+    with pytest.raises(ValueError, match=f"{lanes + 1} robots for a field of {lanes} lanes"):
+        check_lanes(nav, lanes + 1)
 
 
 def test_a_field_of_600_plots_for_two_robots() -> None:
