@@ -1,4 +1,5 @@
-"""Plan files: plan.json, plan.geojson, waypoints.csv and plan.png.
+"""Plan files: plan.json, plan.geojson, waypoints.csv and plan.png (and each robot's
+waypoints-robot<N>.csv when several share the survey).
 
 plan.geojson is in WGS84 (lon, lat) when the layout is georeferenced; otherwise it holds
 ``field`` frame metres and says so in a top-level ``"frame": "field"`` member (plain
@@ -23,6 +24,7 @@ import numpy.typing as npt
 from matplotlib.collections import LineCollection, PolyCollection
 
 from common.field_geojson import field_to_wgs84
+from common.messages.nav import Leg
 from common.messages.plan import PlanResult
 from services.planner.waypoints import heading
 
@@ -37,12 +39,12 @@ def write_json(result: PlanResult, path: Path) -> Path:
     return path
 
 
-def write_waypoints_csv(result: PlanResult, path: Path) -> Path:
+def write_waypoints_csv(legs: list[Leg], path: Path) -> Path:
     """One row per leg: field-frame metres, headings in radians (REP-103)."""
     with path.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["leg", "x0", "y0", "x1", "y1", "heading", "final_yaw", "scan_id"])
-        for k, leg in enumerate(result.legs):
+        for k, leg in enumerate(legs):
             fy = "" if leg.final_yaw is None else f"{leg.final_yaw:.6f}"
             sid = "" if leg.scan_id is None else leg.scan_id
             w.writerow(
@@ -160,8 +162,7 @@ def write_png(result: PlanResult, path: Path) -> Path:
         f"({cov.method}, {cov.status}); {cov.cells_covered}/{cov.cells_coverable} cells"
     )
     a0.legend(loc="upper right", fontsize=7)
-    segs = [[(g.x0, g.y0), (g.x1, g.y1)] for g in result.legs]
-    a1.add_collection(LineCollection(segs, colors="black", lw=1.2 if few else 0.6))
+    _draw_routes(a1, result, 1.2 if few else 0.6)
     a1.scatter(xs[sel], ys[sel], marker="*", s=80 if few else 10, c="red", zorder=3)
     a1.scatter(
         [result.origin[0]], [result.origin[1]], marker="o", s=60, c="blue", zorder=3, label="Origin"
@@ -177,10 +178,13 @@ def write_png(result: PlanResult, path: Path) -> Path:
                 fontsize=7,
                 color="blue",
             )
-    t = result.tour
+    t, f = result.tour, result.fleet
     a1.set_title(
         f"{t.nav.upper()} tour {t.length:.1f} m ({t.method}, {t.status}); "
         f"nearest neighbour {t.nn_length:.1f} m"
+        if f is None
+        else f"{len(f.parts)} robots: the slowest {f.makespan_s / 3600:.1f} h, "
+        f"one robot {f.one_robot_s / 3600:.1f} h"
     )
     a1.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
@@ -189,15 +193,34 @@ def write_png(result: PlanResult, path: Path) -> Path:
     return path
 
 
+def _draw_routes(ax: Any, result: PlanResult, lw: float) -> None:
+    """The tour's legs in black, or each robot's share in a colour of its own."""
+    shares: list[tuple[Any, list[Leg], str]]
+    if result.fleet is None:
+        shares = [("black", result.legs, "")]
+    else:
+        cmap = plt.get_cmap("tab10")
+        parts = result.fleet.parts
+        shares = [(cmap(k % 10), p.legs, f"robot {p.robot}") for k, p in enumerate(parts)]
+    for colour, legs, label in shares:
+        segs = [[(g.x0, g.y0), (g.x1, g.y1)] for g in legs]
+        ax.add_collection(LineCollection(segs, colors=[colour], lw=lw, label=label or None))
+
+
 def write_all(result: PlanResult, out_dir: str | Path) -> dict[str, Path]:
-    """Write the four plan files into ``out_dir`` (created); returns name -> path."""
+    """Write the plan files into ``out_dir`` (created): plan.json, plan.geojson,
+    waypoints.csv (the tour), plan.png, and with several robots each one's
+    waypoints-robot<N>.csv; returns name -> path."""
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     files = {
         "plan.json": write_json(result, d / "plan.json"),
         "plan.geojson": write_geojson(result, d / "plan.geojson"),
-        "waypoints.csv": write_waypoints_csv(result, d / "waypoints.csv"),
+        "waypoints.csv": write_waypoints_csv(result.legs, d / "waypoints.csv"),
         "plan.png": write_png(result, d / "plan.png"),
     }
+    for part in result.fleet.parts if result.fleet is not None else []:
+        name = f"waypoints-robot{part.robot}.csv"
+        files[name] = write_waypoints_csv(part.legs, d / name)
     log.info("plan files written to %s", d)
     return files

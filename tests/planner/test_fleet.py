@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import csv
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -11,6 +14,7 @@ from common.messages.plan import PlanOptions
 from phenorover.eval.fields import engr_sized
 from services.planner.core import plan
 from services.planner.fleet import check_lanes, split_tours, tour_time
+from services.planner.outputs import write_all
 from services.planner.route import Navigator
 
 PACE = Pace(speed=0.5, location_s=300.0)
@@ -47,7 +51,7 @@ def test_more_robots_than_locations_or_lanes_is_one_line() -> None:
         check_lanes(nav, lanes + 1)
 
 
-def test_a_field_of_600_plots_for_two_robots() -> None:
+def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
     layout = engr_sized(20, 30, "f600")
     opt = PlanOptions(
         robots=2, cover="greedy", tour_time_limit_s=2.0, pace=Pace(speed=0.3, location_s=300.0)
@@ -62,3 +66,8 @@ def test_a_field_of_600_plots_for_two_robots() -> None:
         assert (p.legs[-1].x1, p.legs[-1].y1) == pytest.approx(r.origin)
     assert r.survey is not None and r.fleet.one_robot_s == r.survey.time_s
     assert r.fleet.makespan_s <= 0.6 * r.fleet.one_robot_s
+    # each robot's waypoints beside the tour's
+    files = write_all(r, tmp_path)
+    for p in r.fleet.parts:
+        rows = list(csv.DictReader(files[f"waypoints-robot{p.robot}.csv"].open()))
+        assert [int(x["scan_id"]) for x in rows if x["scan_id"]] == p.order[1:-1]
