@@ -36,7 +36,7 @@ from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob, start_registration
 from services.mission.sources import new_mission, requested_plan, unfinished
 from services.mission.survey import Survey
-from services.mission.tour import clock_started, walk
+from services.mission.tour import clock_started, return_home, walk
 
 # wall seconds between copies of the plan on mission/plan, for subscribers joining late
 PLAN_REPUBLISH_S = 5.0
@@ -238,13 +238,8 @@ class MissionService:
             assert self.plan is not None
             battery = BatteryWatch(self, sv, self.cfg, self.plan, self.ctx.robot.battery)
             walk(self, log, sv, self.cfg, segs, self._wake, battery)
-            home = [s for s in segs if s.cand_id is None]
-            if self.cfg.return_to_origin and home:
-                self.phase, self.detail, self.current = MissionPhase.RETURNING, "to Origin", 0
-                sv.detail = self.detail
-                ok, why = sv.drive(home[0], f"{self.mission}.home")
-                if not ok:
-                    self.event("error", f"return to the Origin: {why}")
+            if self.cfg.return_to_origin:
+                return_home(self, sv, segs)
             log.set_state("done")
             self.event("info", f"mission {self.mission} done")
             self.detail = ""

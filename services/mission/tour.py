@@ -28,6 +28,7 @@ class Host(Protocol):
 
     phase: MissionPhase
     current: int
+    detail: str
 
     def event(self, level: str, text: str) -> None: ...
 
@@ -91,6 +92,19 @@ def visit(
         drive = False  # position() drives again when the robot is off
     log.update(idx, status="failed", reason=why)
     host.event("error", f"{tag}: failed after {cfg.scan_retries + 1} attempts: {why}")
+
+
+def return_home(host: Host, sv: Survey, segs: list[Segment]) -> None:
+    """Drive the plan's last segment, back to the Origin; a failure is reported, not
+    raised: the scans are taken."""
+    home = [s for s in segs if s.cand_id is None]
+    if not home:
+        return
+    host.phase, host.detail, host.current = MissionPhase.RETURNING, "to Origin", 0
+    sv.detail = host.detail
+    ok, why = sv.drive(home[0], f"{sv.mission}.home")
+    if not ok:
+        host.event("error", f"return to the Origin: {why}")
 
 
 def clock_started(clock: Clock, stop: threading.Event, log: logging.Logger) -> bool:

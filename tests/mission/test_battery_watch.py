@@ -151,3 +151,20 @@ def test_without_battery_state_or_round_trips_the_battery_is_not_watched(
     sv2.charge(0.1)
     assert w2.before(step_of(seg, 1), seg) is seg
     assert "planned before they were" in host2.events[0][1]
+
+
+def test_after_a_swap_that_cut_the_power_the_robot_leaves_from_the_origin(
+    engr: PlanResult,
+) -> None:
+    """On the Husky a swap powers the computer down: the mission starts afresh with the
+    robot at the Origin and a full battery, and must not join the next location's
+    segment (from the last location, across the plots) but take the round trip."""
+    w, sv, host = watch(engr)
+    segs = segments(engr)
+    seg = segs[3]
+    sv.pose.put(pose(*engr.origin))
+    sv.charge(1.0)
+    got = w.before(step_of(seg, 3), seg)
+    assert engr.via_origin is not None
+    assert got == Segment(seg.cand_id, round_trip_halves(engr.via_origin[seg.cand_id or 0])[0])
+    assert got.legs[0].x0 == pytest.approx(engr.origin[0]) and host.events == []
