@@ -40,10 +40,8 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
+from common.arrays import F64
 
 # trait name -> unit, in the order the field book's columns list them
 TRAITS: dict[str, str] = {

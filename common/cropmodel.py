@@ -26,11 +26,9 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.field import Field, FieldLayout
 from common.files import atomic_write
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 HEIGHT_PERCENTILE = 99.0
 MAX_FILE_BYTES = 64 << 20

@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common import fieldbook
+from common.arrays import F64, I64
 
 # the types live in common.field_model; the field's users take them from here
 from common.field_model import (
@@ -53,8 +54,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 
 def _cells_along(extent: float, voxel: float) -> int:

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common import fieldbook
+from common.arrays import F64
 from common.clock import SimClock
 from common.field import assemble, field_path, load_field
 from common.field_model import (
@@ -40,8 +41,6 @@ from common.field_model import (
     Voxel,
 )
 from common.geo import FieldFrame
-
-F64 = npt.NDArray[np.float64]
 
 
 class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):

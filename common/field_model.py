@@ -11,8 +11,8 @@ from typing import Annotated, Literal
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.files import read_regular
 
 # Every float finite by schema (NaN and inf fail a two-sided bound): these configs
@@ -41,8 +41,6 @@ Site = tuple[
 ]
 
 FIELDS_DIR = Path(__file__).with_name("fields")
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 
 class FieldError(ValueError):

@@ -15,9 +15,8 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-import numpy as np
-import numpy.typing as npt
 
+from common.arrays import I64
 from common.field_model import (
     MAX_PLOTS,
     Field,
@@ -49,7 +48,6 @@ ALIASES: dict[str, tuple[str, ...]] = {
     "column": ("column", "col", "col_number", "column_number"),
 }
 REQUIRED = ("plot", "row", "column")
-I64 = npt.NDArray[np.int64]
 
 
 def _one_line(exc: Exception) -> str:

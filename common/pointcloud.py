@@ -25,9 +25,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from common.arrays import F32
 from common.poses import F64, apply, check_pose
 
-F32 = npt.NDArray[np.float32]
 # (x, y, z) field -> (east, north, up) UTM, arrays in and out
 UtmFn = Callable[[F64, F64, F64], tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike]]
 

@@ -33,9 +33,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64
 from common.geo import rot_zyx
-
-F64 = npt.NDArray[np.float64]
 
 
 class PoseError(ValueError):

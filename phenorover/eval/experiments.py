@@ -15,11 +15,10 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64
 from common.field import Field
 from common.geo import wrap_angle
 from common.messages.nav import Leg
-
-F64 = npt.NDArray[np.float64]
 
 
 def legs_through(points: Sequence[tuple[float, float]]) -> list[Leg]:

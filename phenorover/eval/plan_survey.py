@@ -17,17 +17,14 @@ from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.messages.plan import PlanResult
 from services.sim.foliage import EMPTY
 from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.scene import LEAF_HIT, STEM_HIT
 from services.sim.world import World
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 DEFAULT_STEP_DEG = 0.5
 # cells reach at most this many past a plot box's side (lean margins are <= 1 m)

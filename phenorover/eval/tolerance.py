@@ -18,12 +18,10 @@ import numpy.typing as npt
 import scipy.sparse as sp
 
 # the planner's own clearance rule for candidates; turned into a footprint test below
+from common.arrays import F64, I64
 from common.field import Field, FieldLayout, ScannerModel, _clear
 from common.messages.plan import PlanOptions
 from services.planner.visibility import compute_visibility
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 RADII = (0.0, 0.02, 0.05, 0.10, 0.20, 0.30, 0.50)  # m
 # eight compass directions, counter-clockwise from the field's +x axis (the rows)

@@ -20,7 +20,8 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
+from common.arrays import F64
+
 B = npt.NDArray[np.bool_]
 # heritability from (entries, reps, values): services.traits.stats.heritability
 H2Fn = Callable[[list[str], list[int | None], F64], Any]

@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64
 from common.geo import wrap_angle
 from services.nav.ekf_config import EkfConfig
 from services.nav.ekf_guard import (
@@ -51,7 +52,6 @@ from services.nav.ekf_models import (
 
 __all__ = ["CHI2_999", "EkfConfig", "Localizer"]
 
-F64 = npt.NDArray[np.float64]
 
 # chi-square 99.9 % quantiles for 1, 2, 3 degrees of freedom
 CHI2_999 = {1: 10.83, 2: 13.82, 3: 16.27}

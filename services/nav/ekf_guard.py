@@ -16,7 +16,8 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
+from common.arrays import F64
+
 log = logging.getLogger("services.nav.ekf")
 
 #: the largest coordinate (m) in the field frame: the bus's own bound

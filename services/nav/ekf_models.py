@@ -8,12 +8,11 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64
 from services.nav.ekf_config import EkfConfig
 from services.nav.ekf_guard import ConsistentRun
 
-F64 = npt.NDArray[np.float64]
 Model = tuple[Callable[[F64], F64], Callable[[F64], F64]]
 
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F32, F64, I32, I64
 from common.field import Field, ScannerModel
 from services.planner.exact import exact_kernel
 from services.planner.faces import exposed_faces
@@ -23,10 +23,6 @@ from services.planner.raycast import (
     record,
 )
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
-F32 = npt.NDArray[np.float32]
 Pairs = tuple[I32, I32, I32, F32]  # candidate, cell, hits, nearest range
 Cast = tuple[Pairs, int]  # a chunk's pairs and the rays cast for them
 

@@ -20,9 +20,9 @@ import numpy.typing as npt
 import scipy.sparse as sp
 from ortools.sat.python import cp_model
 
-log = logging.getLogger(__name__)
+from common.arrays import I64
 
-I64 = npt.NDArray[np.int64]
+log = logging.getLogger(__name__)
 
 
 @dataclasses.dataclass(frozen=True)

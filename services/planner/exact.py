@@ -20,11 +20,9 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, I64
 from services.planner.occlusion import plot_hidden, side_hidden
 from services.planner.raycast import GridArgs, Table, cell_of, first_hit, record
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 # the scanner's limits as the kernels take them: (min range, max range, vertical start
 # and end, horizontal start, horizontal span), metres and degrees

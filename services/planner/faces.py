@@ -4,12 +4,9 @@
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.field import Field
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 
 def exposed_faces(field: Field) -> tuple[F64, I64, I64]:

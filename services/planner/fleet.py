@@ -13,9 +13,9 @@ import itertools
 import time
 
 import numpy as np
-import numpy.typing as npt
 from ortools.constraint_solver import pywrapcp
 
+from common.arrays import F64
 from common.battery import Battery, Pace
 from common.messages.nav import Leg
 from common.messages.plan import Fleet, FleetPart, PlanOptions
@@ -24,7 +24,6 @@ from services.planner.swaps import survey_estimate
 from services.planner.tsp import gls_parameters
 from services.planner.waypoints import tour_legs
 
-F64 = npt.NDArray[np.float64]
 # routing works in integers: deciseconds
 _SCALE = 10.0
 # the weight of the span (the slowest robot's time) against the sum of times: large, so

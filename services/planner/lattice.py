@@ -25,13 +25,9 @@ from collections.abc import Callable
 
 import numba as nb
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F32, I32, I64
 from common.field import Field
-
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
-F32 = npt.NDArray[np.float32]
 
 _TOL = 1e-9  # metres: a lattice's boxes and lanes agree to this
 

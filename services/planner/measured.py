@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common import cropmodel
+from common.arrays import F64
 from common.cropmodel import CropModel, CropModelError
 from common.field import Field, FieldError, FieldLayout, ScannerModel, assemble
 from common.messages.core import Array
@@ -26,7 +27,6 @@ from services.planner.core import plan
 from services.planner.request import resolve_field
 from services.planner.visibility import Progress
 
-F64 = npt.NDArray[np.float64]
 Mask = npt.NDArray[np.bool_]
 
 BARE_HEIGHT = 0.05  # m, a plot without canopy: the canopy threshold's height

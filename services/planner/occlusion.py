@@ -12,12 +12,9 @@ from __future__ import annotations
 import math
 
 import numba as nb
-import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64
 from services.planner.raycast import GridArgs, _slab, first_hit
-
-F64 = npt.NDArray[np.float64]
 
 
 @nb.njit(cache=True, error_model="numpy")

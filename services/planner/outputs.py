@@ -20,17 +20,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import msgspec
 import numpy as np
-import numpy.typing as npt
 from matplotlib.collections import LineCollection, PolyCollection
 
+from common.arrays import F64
 from common.field_geojson import field_to_wgs84
 from common.messages.nav import Leg
 from common.messages.plan import PlanResult
 from services.planner.waypoints import heading
 
 log = logging.getLogger(__name__)
-
-F64 = npt.NDArray[np.float64]
 
 
 def write_json(result: PlanResult, path: Path) -> Path:

@@ -15,9 +15,7 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-
+from common.arrays import F64, I64
 
 _PAR = 1e-12
 

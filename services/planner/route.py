@@ -22,9 +22,9 @@ import numpy.typing as npt
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
+from common.arrays import F64
 from common.field import Field
 
-F64 = npt.NDArray[np.float64]
 NavMode = Literal["br", "aha", "lanes"]
 NAV_MODES = ("br", "aha", "lanes")
 _TOL = 1e-6

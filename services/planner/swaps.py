@@ -5,14 +5,12 @@ with the swaps the mission would make (:func:`common.battery.estimate`). Pure.""
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64
 from common.battery import Battery, Estimate, Pace, Visit, estimate
 from common.messages.nav import Leg, legs_length, round_trip_halves
 from services.planner.route import Navigator
 from services.planner.waypoints import tour_legs
-
-F64 = npt.NDArray[np.float64]
 
 
 def via_origin(nav: Navigator, origin: F64, xy: F64, ids: list[int]) -> dict[int, list[Leg]]:

@@ -19,13 +19,13 @@ from typing import Any
 
 import numba as nb
 import numpy as np
-import numpy.typing as npt
 from ortools.constraint_solver import pywrapcp, routing_enums_pb2
 from ortools.sat.python import cp_model
 
+from common.arrays import F64
+
 log = logging.getLogger(__name__)
 
-F64 = npt.NDArray[np.float64]
 HELD_KARP_MAX = 14
 CPSAT_MAX = 80
 # integer arc costs for the OR-Tools solvers, in millimetres

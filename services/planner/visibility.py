@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
 
+from common.arrays import F64, I64
 from common.field import Field, ScannerModel
 from services.planner.caster import CHUNK, Cast, Caster, Pairs, cast_chunk
 from services.planner.lattice import lattice_of
@@ -34,8 +35,6 @@ from services.planner.lattice import translate as translate_pairs
 
 log = logging.getLogger(__name__)
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 Progress = Callable[[int, int], None]
 # casts chunks (first, last + 1) of candidates with the options (mode, samples,
 # cull_sides, step_deg) somewhere: (last + 1, (pairs, rays)) of each, in order

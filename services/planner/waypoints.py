@@ -16,13 +16,9 @@ from __future__ import annotations
 import itertools
 import math
 
-import numpy as np
-import numpy.typing as npt
-
+from common.arrays import F64
 from common.messages.nav import Leg
 from services.planner.route import Navigator
-
-F64 = npt.NDArray[np.float64]
 
 
 def heading(leg: Leg) -> float:

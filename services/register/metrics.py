@@ -32,9 +32,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
+from common.arrays import I64
 from common.poses import F64, apply, inv
-
-I64 = npt.NDArray[np.int64]
 
 
 class TargetStats(msgspec.Struct, frozen=True, kw_only=True):

@@ -27,7 +27,8 @@ import numpy.typing as npt
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-F64 = npt.NDArray[np.float64]
+from common.arrays import F64
+
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 

@@ -28,10 +28,10 @@ from scipy.optimize import least_squares
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from common.arrays import I64
 from common.poses import F64, apply
 from services.register.poses import perturb
 
-I64 = npt.NDArray[np.int64]
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 

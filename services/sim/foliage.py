@@ -23,11 +23,9 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, I64, U8
 from services.sim.terrain import Terrain
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-U8 = npt.NDArray[np.uint8]
 Mask = npt.NDArray[np.bool_]
 Rng = np.random.Generator
 

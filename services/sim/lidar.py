@@ -13,15 +13,12 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F32, F64
 from common.geo import rot_zyx
 from common.robot import LidarMount, default_robot
 from services.sim.robot import RobotState, pose_matrix
 from services.sim.scene import Scene
-
-F32 = npt.NDArray[np.float32]
-F64 = npt.NDArray[np.float64]
 
 
 class LidarConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):

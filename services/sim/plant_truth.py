@@ -22,9 +22,9 @@ from typing import TYPE_CHECKING, Any
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
 from common import fieldbook
+from common.arrays import F64
 from common.canopy import CanopyDefinition, plot_traits
 from common.field import Field, FieldLayout
 from services.sim.foliage import Foliage
@@ -49,7 +49,6 @@ _PLANNED = (
     "height_m_mature",
     "height_m_planned",
 )
-F64 = npt.NDArray[np.float64]
 
 
 def plant_truth(

@@ -32,14 +32,10 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F32, F64, I32, U8
 from common.field import ScannerModel
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
 from services.sim.storage import atomic_path
-
-F64 = npt.NDArray[np.float64]
-F32 = npt.NDArray[np.float32]
-I32 = npt.NDArray[np.int32]
-U8 = npt.NDArray[np.uint8]
 
 ARCSEC = math.pi / (180 * 3600)
 

@@ -33,11 +33,11 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64
 from common.geo import rot_zyx, wrap_angle
 from common.robot import Robot, default_robot
 from services.sim.terrain import Terrain
 
-F64 = npt.NDArray[np.float64]
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 NonNeg = Annotated[float, msgspec.Meta(ge=0)]
 

@@ -18,11 +18,10 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, U8
 from services.sim.foliage import LEAF, STEM, Foliage
 from services.sim.terrain import Terrain, bilinear_height, ray_terrain
 
-F64 = npt.NDArray[np.float64]
-U8 = npt.NDArray[np.uint8]
 _JIT: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 
 NONE, GROUND, LEAF_HIT, STEM_HIT, SPHERE, POLE, OBSTACLE, PLOT = 0, 1, 2, 3, 4, 5, 6, 7

@@ -19,7 +19,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
+from common.arrays import F64
 
 
 class SkyMask:

@@ -34,13 +34,11 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64
 from common.field import Field
 from services.sim.scene import Scene
 from services.sim.terrain import Terrain
-
-F64 = npt.NDArray[np.float64]
 
 # placement utility of a scan seeing 0, 1, 2, >= 3 spheres: a second sphere is worth
 # most, as it makes the scan solvable by targets with the compensator's tilt (and

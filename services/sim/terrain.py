@@ -20,7 +20,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import gaussian_filter
 
-F64 = npt.NDArray[np.float64]
+from common.arrays import F64
+
 _JIT: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 
 

@@ -30,11 +30,11 @@ import numpy as np
 import numpy.typing as npt
 
 from common import fieldbook
+from common.arrays import F64
 from common.field import Field, FieldLayout
 from common.field_model import PlotRecord
 from services.sim.foliage import FoliageConfig, PlotGrowth
 
-F64 = npt.NDArray[np.float64]
 Sd = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 Share = Annotated[float, msgspec.Meta(ge=0.0, lt=1.0)]
 Deg = Annotated[float, msgspec.Meta(ge=0.0, le=60.0)]

@@ -7,16 +7,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64, U8
 from common.field import Field
 from services.sim.foliage import EMPTY, STEM, Foliage
 from services.sim.scene import GROUND, LEAF_HIT, POLE, SPHERE, STEM_HIT
 from services.sim.targets import Targets
 from services.sim.terrain import Terrain
-
-F64 = npt.NDArray[np.float64]
-U8 = npt.NDArray[np.uint8]
 
 
 def truth_points(

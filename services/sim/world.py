@@ -14,6 +14,7 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, U8
 from common.field import Field, FieldLayout
 from common.geo import rot_zyx
 from common.robot import Robot, default_robot
@@ -35,8 +36,6 @@ from services.sim.terrain import Terrain, TerrainConfig, build_terrain
 from services.sim.trial import TrialConfig, TrialPlan, plan_trial
 from services.sim.truth_points import truth_points
 
-F64 = npt.NDArray[np.float64]
-U8 = npt.NDArray[np.uint8]
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.canopy import TRAITS, CanopyDefinition, plot_traits
 from common.cropmodel import CropModel, assign_plots, crop_model
 from common.field import Field, FieldLayout
@@ -30,8 +31,6 @@ from services.traits.hidden import hidden_voxels
 from services.traits.run import Record, RunError, RunInput, load_run
 from services.traits.season import Offset
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 log = logging.getLogger("phenorover.traits")
 
 OK, OCCLUDED, NO_POINTS = "ok", "occluded", "no points"

@@ -20,9 +20,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
+from common.arrays import F64
 from services.traits.config import GroundConfig
 
-F64 = npt.NDArray[np.float64]
 B = npt.NDArray[np.bool_]
 
 

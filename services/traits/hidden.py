@@ -29,14 +29,13 @@ import numba as nb
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64, I64
 from common.canopy import CanopyDefinition, footprint_cells
 from common.cropmodel import plot_bands
 from common.field import Field
 from services.traits.ground import GroundModel
 from services.traits.run import Views
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 B = npt.NDArray[np.bool_]
 
 MAX_LAYERS = 100  # layers of voxels above the ground a canopy may fill (10 m at 10 cm)

@@ -27,13 +27,13 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.arrays import F64
 from common.field import Field, FieldError, FieldLayout, build_field, load_field
 from common.field_model import PlotRecord
 from common.fieldbook import records
 from common.messages.plan import PlanResult
 from common.missionlog import MissionLogError, read_run
 
-F64 = npt.NDArray[np.float64]
 log = logging.getLogger("phenorover.traits")
 
 CLOUD = "registered.laz"

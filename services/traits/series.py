@@ -29,8 +29,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import F64
 from common.cluster import file_stamp
 from services.traits.compute import OK, Found, RunTraits, compute_traits, field_ground
 from services.traits.config import TraitsConfig
@@ -38,7 +38,6 @@ from services.traits.ground import GroundModel
 from services.traits.run import RunError, RunInput, load_run
 from services.traits.season import LogisticFit, Offset, fit_all, growth, vertical_offset
 
-F64 = npt.NDArray[np.float64]
 log = logging.getLogger("phenorover.traits")
 
 

@@ -22,9 +22,9 @@ import math
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import rerun as rr
 
+from common.arrays import F64, I64, U8
 from common.field import Field
 from common.geo import FieldFrame
 from common.messages.base import BatteryState, LaserScan
@@ -34,10 +34,6 @@ from common.messages.nav import NavProgress
 from common.messages.plan import PlanResult
 from common.messages.scan import ScannerStatus
 from common.robot import LidarMount, Robot
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-U8 = npt.NDArray[np.uint8]
 
 ROUTE_Z = 0.02  # lines drawn just above the ground so the terrain does not hide them
 

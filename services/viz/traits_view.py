@@ -25,18 +25,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 import rerun as rr
 
+from common.arrays import F64, U8
 from common.canopy import BOOK_COLUMNS, TRAITS, column
 from common.field import Field
 from common.files import read_regular
 from common.messages.mission import MissionPhase, MissionState
 from services.viz.config import VizConfig
 from services.viz.scene import GREY, Entry
-
-F64 = npt.NDArray[np.float64]
-U8 = npt.NDArray[np.uint8]
 
 FIXED = BOOK_COLUMNS
 MAX_BYTES = 32 * 1024 * 1024  # ~1.5 kB a plot at the field's 20 000-plot limit

@@ -20,13 +20,12 @@ from collections.abc import Mapping, Sequence
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
+from common.arrays import I64
 from common.poses import F64, apply
 from services.register.metrics import PointStats, TargetStats, point_stats, subsample, target_stats
 from services.register.pipeline import Registration
 
-I64 = npt.NDArray[np.int64]
 # (key in report.json, label)
 METHODS = (
     ("navigation", "Nav. sensors only"),
