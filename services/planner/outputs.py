@@ -1,5 +1,6 @@
 """Plan files: plan.json, plan.geojson, waypoints.csv and plan.png (and each robot's
-waypoints-robot<N>.csv when several share the survey).
+waypoints-robot<N>.csv when several share the survey), each written whole or not at
+all.
 
 plan.geojson is in WGS84 (lon, lat) when the layout is georeferenced; otherwise it holds
 ``field`` frame metres and says so in a top-level ``"frame": "field"`` member (plain
@@ -24,6 +25,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from common.arrays import F64
 from common.field_geojson import field_to_wgs84
+from common.files import atomic_write
 from common.messages.nav import Leg
 from common.messages.plan import PlanResult
 from services.planner.waypoints import heading
@@ -33,12 +35,18 @@ log = logging.getLogger(__name__)
 
 def write_json(result: PlanResult, path: Path) -> Path:
     """The whole result, decodable with ``msgspec.json.decode(data, type=PlanResult)``."""
-    path.write_bytes(msgspec.json.format(msgspec.json.encode(result), indent=1))
+    data = msgspec.json.format(msgspec.json.encode(result), indent=1)
+    atomic_write(path, lambda tmp: tmp.write_bytes(data))
     return path
 
 
 def write_waypoints_csv(legs: list[Leg], path: Path) -> Path:
     """One row per leg: field-frame metres, headings in radians (REP-103)."""
+    atomic_write(path, lambda tmp: _waypoints(legs, tmp))
+    return path
+
+
+def _waypoints(legs: list[Leg], path: Path) -> None:
     with path.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["leg", "x0", "y0", "x1", "y1", "heading", "final_yaw", "scan_id"])
@@ -57,7 +65,6 @@ def write_waypoints_csv(legs: list[Leg], path: Path) -> Path:
                     sid,
                 ]
             )
-    return path
 
 
 def write_geojson(result: PlanResult, path: Path) -> Path:
@@ -114,7 +121,8 @@ def write_geojson(result: PlanResult, path: Path) -> Path:
     doc: dict[str, Any] = {"type": "FeatureCollection", "features": feats}
     if not geo:
         doc["frame"] = "field"
-    path.write_bytes(msgspec.json.encode(doc))
+    data = msgspec.json.encode(doc)
+    atomic_write(path, lambda tmp: tmp.write_bytes(data))
     return path
 
 
@@ -186,7 +194,7 @@ def write_png(result: PlanResult, path: Path) -> Path:
     )
     a1.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130))
     plt.close(fig)
     return path
 
