@@ -144,6 +144,8 @@ class BatteryWatch:
         self.host.event(
             "info", f"at the Origin, waiting for a battery swap ({100 * charge / full:.0f} %)"
         )
+        # no deadline: a swap waits for a person, as a pause does; an abort or a stop
+        # ends the wait (sv.wait raises Aborted), and the dashboard shows the phase
         while (now := self._charge_wh()) is None or now < self.cfg.swapped_at * full:
             self.sv.wait(1.0)
         self.swaps += 1

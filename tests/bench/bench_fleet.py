@@ -24,13 +24,13 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2]
 from common.battery import Battery, Pace
 from common.messages.plan import PlanOptions
 from phenorover.eval.fields import engr_sized
-from phenorover.eval.results import Bench, Goal
+from phenorover.eval.results import Bench
 from services.planner.core import plan
 
 FIELDS = {"600 plots": (20, 30), "100 x 100 plots": (100, 100)}
 PACE = Pace()  # the mission's default: 0.3 m/s along routes, 300 s a location
-# the issue's target, for the simulated two-robot survey; here held against the plan
-GOAL = Goal("<=", 0.6, "a third robot, or the split's search for longer")
+# no target: the issue's (two robots in at most 0.6 x one robot's time) is for the
+# simulated two-robot survey, which is not built; a plan's estimate does not meet it
 
 
 def experiment(rows: int, plots: int) -> dict[str, Any]:
@@ -71,7 +71,6 @@ def main() -> int:
             f"{name}: two robots' slowest / one robot (plan estimate)",
             e.get("ratio"),
             "x",
-            goal=GOAL,
             headline=True,
             missing=why,
             note=f"{e.get('locations', 0)} locations split {e.get('shares')}; one robot "
