@@ -19,6 +19,7 @@ from common.ros2.types import BATTERY_STATE, CMD_VEL_TYPES, IMU, LASER_SCAN, ODO
 from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
 from services.base.config import BaseConfig
+from services.base.refusals import Refusals
 from services.base.ros2_convert import (
     battery_from_ros,
     decode_battery,
@@ -96,32 +97,6 @@ class OdomWatch:
                 self._heard = False
             self.stale = now_ns - self._last_ns > self.timeout_ns
             return self.stale
-
-
-class Refusals:
-    """Messages from the driver refused for a bad value: counted in the health counter
-    ``name``, the first one logged (a driver that keeps sending them would flood the
-    log)."""
-
-    def __init__(self, bus: Bus, name: str, what: str) -> None:
-        self.count = 0
-        self._what = what
-        self._log = logging.getLogger(bus.name)
-        self._lock = threading.Lock()
-        bus.report(name, lambda: self.count)
-
-    def passed(self, convert: Callable[[Any], Any], m: Any, to: Callable[[Any], None]) -> None:
-        """``to(convert(m))``, or the refusal counted when convert raises ValueError."""
-        try:
-            out = convert(m)
-        except ValueError as exc:
-            with self._lock:
-                self.count += 1
-                first = self.count == 1
-            if first:
-                self._log.warning("%s refused (later ones only counted): %s", self._what, exc)
-            return
-        to(out)
 
 
 class Ros2Base:

@@ -53,6 +53,7 @@ from common.ros2.types import (
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 from common.service import Context, run
 from services.base.drive import OdometryIntegrator
+from services.base.refusals import Refusals
 
 Cov6 = tuple[float, float, float, float, float, float]
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
@@ -140,7 +141,8 @@ class HuskySim:
     def __init__(self, ctx: Context, cfg: HuskySimConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
         self.silent = False
-        self.refused = 0  # commands that were not finite
+        # commands that were not finite, or stamped too long ago
+        self.commands = Refusals(ctx.bus, "commands_refused", "cmd_vel")
         self._lock = threading.Lock()
         self._odom = OdometryIntegrator()
         self._pose_cov = covariance(cfg.pose_covariance)
@@ -152,7 +154,6 @@ class HuskySim:
         self._battery_pub = self.node.publisher(cfg.battery, BATTERY_STATE, qos=SENSOR_QOS)
         self._wheels = ctx.bus.publisher(keys.SIM_WHEELS)
         ctx.bus.report("ros2_dropped", lambda: self.node.dropped_total)
-        ctx.bus.report("commands_refused", lambda: self.refused)
         self.node.subscribe(cfg.cmd_vel, CMD_VEL_TYPES[cfg.cmd_vel_type], self._on_cmd)
         ctx.bus.subscribe(keys.SIM_ENCODERS, self._on_encoders)
         ctx.bus.subscribe(keys.SIM_LIDAR, self._on_lidar)
@@ -181,9 +182,7 @@ class HuskySim:
                     f"stamped {age_s:.3f} s ago (cmd_vel_timeout {self.cfg.cmd_vel_timeout_s} s)"
                 )
         if problem:
-            self.refused += 1
-            if self.refused == 1:
-                self.ctx.log.warning("cmd_vel refused (later ones only counted): %s", problem)
+            self.commands.refuse(problem)
             return
         self._wheels.put(SimWheelCommand(stamp_ns=now_ns, v=v, w=w))
 
