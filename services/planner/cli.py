@@ -10,7 +10,8 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from common.battery import Pace
+import msgspec
+
 from common.cluster import ClusterError, add_cluster_arguments, cluster_of
 from common.config import ConfigError
 from common.field import FieldError
@@ -165,27 +166,32 @@ def summary(r: PlanResult) -> str:
     return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
 
 
+def options(args: argparse.Namespace) -> PlanOptions:
+    """The command line's options, checked against their bounds as a request's are
+    (a Struct's constructor checks none); ValidationError names the one at fault."""
+    pace = {"speed": args.speed, "location_s": args.location_s}
+    given = {
+        "nav": args.nav,
+        "cover": args.cover,
+        "visibility": args.visibility,
+        "grid_step_deg": args.grid_step,
+        "coverage_target": args.coverage,
+        "min_hits": args.min_hits,
+        "tour": args.tour,
+        "robots": args.robots,
+        "pace": {k: v for k, v in pace.items() if v is not None},
+    }
+    return msgspec.convert(given, PlanOptions)
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
-    opts = PlanOptions(
-        nav=args.nav,
-        cover=args.cover,
-        visibility=args.visibility,
-        grid_step_deg=args.grid_step,
-        coverage_target=args.coverage,
-        min_hits=args.min_hits,
-        tour=args.tour,
-        robots=args.robots,
-        pace=Pace(
-            speed=args.speed or Pace().speed,
-            location_s=Pace().location_s if args.location_s is None else args.location_s,
-        ),
-    )
     try:
+        opts = options(args)
         robot = load_robot(args.robot)
         dask = bool(args.cluster or args.workers)
         # a Dask worker or a remote planner builds the field from the request alone
         req = request_from_source(args.field, robot, opts, inline=args.remote or dask)
-    except (FieldError, ConfigError) as exc:
+    except (FieldError, ConfigError, msgspec.ValidationError) as exc:
         print(f"phenorover plan: {exc}", file=sys.stderr)
         return 2
     if dask and (args.remote or args.from_survey is not None):

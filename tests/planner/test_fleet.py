@@ -11,6 +11,7 @@ import pytest
 from common.battery import Pace
 from common.field import load_field
 from common.messages.plan import PlanOptions
+from phenorover.cli import main
 from phenorover.eval.fields import engr_sized
 from services.planner.core import plan
 from services.planner.fleet import check_lanes, split_tours, tour_time
@@ -71,3 +72,19 @@ def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
     for p in r.fleet.parts:
         rows = list(csv.DictReader(files[f"waypoints-robot{p.robot}.csv"].open()))
         assert [int(x["scan_id"]) for x in rows if x["scan_id"]] == p.order[1:-1]
+
+
+@pytest.mark.parametrize(
+    ("flags", "where"),
+    [
+        (["--speed", "-1"], "$.pace.speed"),
+        (["--robots", "0"], "$.robots"),
+        (["--location-s", "nan"], "$.pace.location_s"),
+    ],
+)
+def test_plan_cli_refuses_a_bad_option_in_one_line(
+    flags: list[str], where: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["plan", "engr", "--out", str(tmp_path), *flags]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and where in err[0], err
