@@ -80,8 +80,14 @@ class Grants:
     serves: tuple[str, ...] = ()
 
 
+def _scoped(key: str) -> tuple[str, ...]:
+    """A key as a key expression, and as any robot's in a namespace (:mod:`common.keys`)."""
+    both = (key_expr(key), key_expr(keys.in_namespace(key, "*")))
+    return both[:1] if both[0] == both[1] else both
+
+
 def _keys(*items: keys.Topic[Any] | keys.Rpc[Any, Any]) -> tuple[str, ...]:
-    return tuple(key_expr(i.key) for i in items)
+    return tuple(e for i in items for e in _scoped(i.key))
 
 
 # what every machine may send besides its role's grants: heartbeats and pings
@@ -91,7 +97,7 @@ EVERYONE = Grants(publishes=_keys(keys.HEALTH), calls=_keys(keys.PING), serves=_
 # publisher's heartbeats, cache queryable and liveliness token (``@adv/pub``), the
 # subscribers' tokens (``@adv/sub``). ``@adv`` is a verbatim chunk that ``**`` never
 # matches, so these get rules of their own.
-HISTORY = tuple(key_expr(t.key) for t in keys.ALL_TOPICS if t.history)
+HISTORY = _keys(*(t for t in keys.ALL_TOPICS if t.history))
 
 
 def adv(expr: str, side: str = "**") -> str:

@@ -87,11 +87,14 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     is the shipped Husky A200, ``common/robots/husky.toml``. ``hung_after_s``: a
     service whose process lives but whose heartbeat (``health/<service>``, once a
     second) has been silent this long (wall time) is taken for hung, killed and
-    restarted by the launcher, as one that died."""
+    restarted by the launcher, as one that died. ``namespace``: the robot's, when
+    several share a field (:mod:`common.keys`): its services' keys live under
+    ``phenorover/<namespace>/``; empty (the default) for a robot surveying alone."""
 
     machine: str
     field: str = ""
     robot: str = ""
+    namespace: Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{0,32}$")] = ""
     clock: Literal["wall", "sim"] = "wall"
     # with the sim clock: the world waits for the services each step
     # (common/lockstep.py), up to ``lockstep_deadline_s`` of wall time for a hung one

@@ -4,11 +4,20 @@ One table, so a subscriber cannot disagree with its publisher about a key or a t
 Keys with ``{placeholders}`` are templates: ``GNSS_FIX.at(antenna=1)``.
 ``TOPICS`` maps each key to its message type; ``RPCS`` maps each query key to its
 (request, reply) types.
+
+Robots sharing a field keep apart by namespace, as ROS 2 robots do: a robot whose
+manifest names a ``namespace`` has its own keys (everything but :data:`SITE`) under
+``phenorover/<namespace>/``, so ``phenorover/nav/pose`` becomes
+``phenorover/rover2/nav/pose``; :func:`in_namespace` says where a key lives and the
+bus (:class:`common.transport.Bus`) applies it to everything a service declares. A
+robot without one (the default, and every single-robot deployment) keeps the plain
+keys.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import re
 from typing import Any, Generic, TypeVar
 
 from common.messages import base, gnss, mission, nav, plan, scan, sim, system
@@ -42,6 +51,10 @@ class Topic(Generic[M]):
     def at(self, **params: Any) -> Topic[M]:
         return dataclasses.replace(self, key=self.key.format(**params))
 
+    def within(self, namespace: str) -> Topic[M]:
+        """This topic as the robot in ``namespace`` has it (:func:`in_namespace`)."""
+        return dataclasses.replace(self, key=in_namespace(self.key, namespace))
+
 
 @dataclasses.dataclass(frozen=True)
 class Rpc(Generic[Q, R]):
@@ -53,6 +66,10 @@ class Rpc(Generic[Q, R]):
 
     def at(self, **params: Any) -> Rpc[Q, R]:
         return dataclasses.replace(self, key=self.key.format(**params))
+
+    def within(self, namespace: str) -> Rpc[Q, R]:
+        """This endpoint as the robot in ``namespace`` has it (:func:`in_namespace`)."""
+        return dataclasses.replace(self, key=in_namespace(self.key, namespace))
 
 
 def _k(path: str) -> str:
@@ -149,6 +166,28 @@ ALL_TOPICS: tuple[Topic[Any], ...] = (
     MISSION_PLAN,
 )
 TOPICS: dict[str, type] = {t.key: t.type for t in ALL_TOPICS}
+
+# What a site shares however many robots survey it: the simulated world's clock, its
+# run and its lockstep (participants named ``<namespace>.<service>``), and the
+# planner, one per base station. Liveliness tokens name their machine already.
+SITE: tuple[str, ...] = (SIM_CLOCK.key, SIM_RUN.key, PLANNER_PLAN.key, SIM_ACK.key, LOCKSTEP)
+_SITE_RE = re.compile("|".join(re.sub(r"\\\{[^}]*\\\}", "[^/]+", re.escape(k)) for k in SITE))
+# a namespace is one chunk of a key: no slash, no wildcard, nothing Zenoh reserves
+NAMESPACE_RE = re.compile(r"^[A-Za-z0-9_-]{0,32}$")
+
+
+def in_namespace(key: str, namespace: str) -> str:
+    """``key`` as a robot in ``namespace`` uses it: under ``phenorover/<namespace>/``
+    unless the key is the site's (:data:`SITE`) or the namespace is empty."""
+    if not namespace or _SITE_RE.fullmatch(key) or not key.startswith(PREFIX + "/"):
+        return key
+    return f"{PREFIX}/{namespace}/{key[len(PREFIX) + 1 :]}"
+
+
+def participant(name: str, namespace: str) -> str:
+    """A service's name where names of every robot meet (lockstep, ``phenorover status``)."""
+    return f"{namespace}.{name}" if namespace else name
+
 
 RPCS: dict[str, tuple[Any, type]] = {
     r.key: (r.request, r.reply)

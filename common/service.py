@@ -203,7 +203,7 @@ def main(
         print(f"{name}: cannot open Zenoh session ({listen} -> {connect}): {exc}", file=sys.stderr)
         return EXIT_ZENOH
 
-    bus = Bus(session, name)
+    bus = Bus(session, name, namespace=manifest.namespace if manifest else "")
     in_step = clock_kind == "sim" and manifest is not None and manifest.lockstep
     clock, inbox = service_clock(bus, lockstep if in_step else "observer", clock_kind, manifest)
     since_ns = time.time_ns()
@@ -238,7 +238,9 @@ def main(
             keys.ALIVE.format(machine=machine, service=name, pid=os.getpid(), since_ns=since_ns)
         )
         if isinstance(clock, LockstepClock):  # the world waits for it from now on
-            step_token = session.liveliness().declare_token(keys.LOCKSTEP.format(service=name))
+            step_token = session.liveliness().declare_token(
+                keys.LOCKSTEP.format(service=bus.participant)
+            )
         log.info("%s: up on %s (%s clock), config: %s", name, machine, clock_kind, cfg)
         service.run(stop)
     except (ConfigError, FieldError) as exc:

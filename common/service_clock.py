@@ -26,10 +26,10 @@ def service_clock(
         return WallClock(), None
     inbox = Inbox(key_intersects) if lockstep != "observer" else None
     if lockstep == "participant" and manifest is not None and inbox is not None:
-        ack = bus.publisher(keys.SIM_ACK.at(service=bus.name))  # before numbering starts
+        ack = bus.publisher(keys.SIM_ACK.at(service=bus.participant))  # before numbering starts
 
         def acked(t: int) -> None:
-            ack.put(ClockAck(stamp_ns=t, service=bus.name, sim_ns=t, published=bus.counts()))
+            ack.put(ClockAck(stamp_ns=t, service=bus.participant, sim_ns=t, published=bus.counts()))
 
         step_clock = LockstepClock(inbox, acked, manifest.lockstep_deadline_s)
         bus.use_lockstep(inbox, step_clock)

@@ -23,7 +23,7 @@ import zenoh
 import zenoh.ext
 
 from common.codec import DecodeStats, decode, encode
-from common.keys import ALIVE_ALL, Rpc, Topic
+from common.keys import ALIVE_ALL, Rpc, Topic, participant
 from common.lockstep import (
     Inbox,
     LockstepClock,
@@ -52,12 +52,19 @@ class Bus:
     Subscription callbacks run on Zenoh's threads: keep them short (store, notify).
     RPC handlers run on a small thread pool so a slow request does not block others.
     ``decode_stats`` counts what failed to decode, ``callback_stats`` what decoded
-    but made its callback or handler raise; both per key.
+    but made its callback or handler raise; both per key. With a ``namespace`` (a
+    robot's, :mod:`common.keys`) every topic and endpoint but the site's is that
+    robot's: the service's own and those it talks to alike.
     """
 
-    def __init__(self, session: zenoh.Session, name: str, rpc_workers: int = 4) -> None:
+    def __init__(
+        self, session: zenoh.Session, name: str, rpc_workers: int = 4, namespace: str = ""
+    ) -> None:
         self.session = session
         self.name = name
+        self.namespace = namespace
+        # the name by which lockstep and the launcher tell this robot's service apart
+        self.participant = participant(name, namespace)
         self.decode_stats = DecodeStats()
         self.callback_stats = DecodeStats()
         self._reports: dict[str, Callable[[], int]] = {}
@@ -87,7 +94,7 @@ class Bus:
             return None
         with self._seq_lock:
             n = self.published[key] = self.published.get(key, 0) + 1
-        return attachment(self.name, n)
+        return attachment(self.participant, n)
 
     def _dropped(self, key: str, exc: Exception) -> None:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -126,6 +133,7 @@ class Bus:
     def publisher(self, topic: Topic[M], in_step: bool = True) -> Publisher[M]:
         """A publisher on ``topic``; in lockstep its messages are numbered unless
         ``in_step`` is False (a heartbeat on the wall clock, which no step waits for)."""
+        topic = topic.within(self.namespace)
         if topic.bulk:
             cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
         elif topic.control:
@@ -160,6 +168,7 @@ class Bus:
     ) -> None:
         """Call ``callback`` with each decoded message on ``topic`` (a key or pattern);
         in lockstep at the step that expects it unless ``immediate``."""
+        topic = topic.within(self.namespace)
         self.subscribe_raw(
             topic.key,
             lambda data: decode(data, topic.type),
@@ -180,6 +189,7 @@ class Bus:
         error reply with a one-line reason; other exceptions are logged and answered
         as internal errors. The service keeps serving either way.
         """
+        rpc = rpc.within(self.namespace)
 
         def work(query: zenoh.Query) -> None:
             serving = None
@@ -202,6 +212,7 @@ class Bus:
         machine's load, which must not change what happens (a timed-out call is
         retried and logged), and a callee that hangs is the lockstep's to name.
         """
+        rpc = rpc.within(self.namespace)
         at = None
         if self._clock is not None:
             at = caller_attachment(self._clock.now_ns())

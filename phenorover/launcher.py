@@ -137,7 +137,7 @@ class Launcher:
         for child in self.children.values():
             self._spawn(child)
         self._router.declare_subscriber(
-            keys.HEALTH.key.replace("{service}", "*"),
+            keys.HEALTH.at(service="*").within(self.manifest.namespace).key,
             lambda sample: self.heartbeats.on_sample(sample.payload.to_bytes(), time.monotonic()),
         )
         self._monitor = threading.Thread(target=self._watch, daemon=True)

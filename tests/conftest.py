@@ -48,10 +48,11 @@ def router_endpoint() -> Iterator[str]:
 
 
 @contextlib.contextmanager
-def client(endpoint: str, name: str = "test") -> Iterator[Bus]:
-    """A bus on a client session of the router at ``endpoint``, closed on exit."""
+def client(endpoint: str, name: str = "test", namespace: str = "") -> Iterator[Bus]:
+    """A bus on a client session of the router at ``endpoint`` (a robot's with
+    ``namespace``), closed on exit."""
     session = zenoh.open(zenoh_config("client", [], [endpoint]))
-    bus = Bus(session, name)
+    bus = Bus(session, name, namespace=namespace)
     try:
         yield bus
     finally:

@@ -196,7 +196,7 @@ class SimService:
         :meth:`Barrier.wait`)."""
         assert self.barrier is not None and self.ctx.inbox is not None
         self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop, everyone)
-        expect = self.barrier.expect(self.ctx.name, self.ctx.bus.counts())
+        expect = self.barrier.expect(self.ctx.bus.participant, self.ctx.bus.counts())
         thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
         for thunk in thunks:  # each takes the world's lock itself
             thunk()
@@ -241,13 +241,13 @@ class SimService:
             with self._lock:
                 # what the devices sense, then the tick expecting it
                 self.devices.publish(k, self.state, self.sim_ns, self.rng)
-                b = self.barrier
+                b, me = self.barrier, self.ctx.bus.participant
                 self._tick = SimClock(
                     stamp_ns=self.sim_ns,
                     sim_ns=self.sim_ns,
                     real_time_factor=self.real_time_factor,
                     step=-1 if b is None else k,
-                    expect={} if b is None else b.expect(self.ctx.name, self.ctx.bus.counts()),
+                    expect={} if b is None else b.expect(me, self.ctx.bus.counts()),
                 )
                 self.clock_pub.put(self._tick)
             if self.barrier is not None:
