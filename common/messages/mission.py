@@ -7,16 +7,21 @@ import enum
 import msgspec
 
 from common.messages.core import FileName, Message, NonNegative
+from common.messages.plan import PlanResult
 
 
 class MissionStart(msgspec.Struct, frozen=True, tag=True):
-    """Start a survey: ``plan_file`` (a plan.json path on the mission host, inside its
-    run folder) or, when empty, a plan requested from the planner for ``field``,
-    which is the deployment's field when empty and must name it otherwise."""
+    """Start a survey: ``plan`` (sent with the command: ``phenorover mission start
+    --plan FILE`` reads it where it runs), ``plan_file`` (a plan.json path on the
+    mission host, inside its run folder) or, when both are empty, a plan requested
+    from the planner for ``field``, which is the deployment's field when empty and
+    must name it otherwise. A plan split between robots is surveyed by each robot's
+    mission in its share (the mission's ``share``)."""
 
     mission: FileName = ""
     field: str = ""
     plan_file: str = ""
+    plan: PlanResult | None = None
 
 
 class MissionPause(msgspec.Struct, frozen=True, tag=True):

@@ -14,7 +14,7 @@ import numpy.typing as npt
 from common.battery import Battery, Estimate, Pace
 from common.field import FieldLayout, ScannerModel
 from common.messages.core import Array, Coordinate, Finite, Message, NonNegative, Positive
-from common.messages.nav import Leg
+from common.messages.nav import Leg, legs_length
 
 Seconds = Positive
 
@@ -146,7 +146,8 @@ class PlanResult(Message, frozen=True, kw_only=True):
     lanes (the way a robot leaves for a battery swap and comes back); ``survey``: the
     survey's time and energy at the options' pace, with the swaps the request's
     battery asks for (:func:`common.battery.estimate`); ``fleet``: with several
-    robots, each one's share."""
+    robots, each one's share; ``share``: the robot (1..N) whose share of such a plan
+    this is (:meth:`share_of`), its locations, legs, tour and time only."""
 
     field: str
     layout: FieldLayout
@@ -166,6 +167,39 @@ class PlanResult(Message, frozen=True, kw_only=True):
     via_origin: dict[int, list[Leg]] | None = None
     survey: Estimate | None = None
     fleet: Fleet | None = None
+    share: Annotated[int, msgspec.Meta(ge=1)] | None = None
+
+    def share_of(self, robot: int) -> PlanResult:
+        """Robot ``robot``'s share (1..N) of a plan split between N robots: its
+        locations, legs, tour and time; the field, candidates, cells and the split
+        itself as they are. ValueError, one line, when the plan has no such share."""
+        if self.fleet is None or self.share is not None:
+            raise ValueError(
+                "the plan is not split between robots (phenorover plan --robots N makes one)"
+            )
+        parts = {p.robot: p for p in self.fleet.parts}
+        if robot not in parts:
+            raise ValueError(f"the plan is split between {len(parts)} robots: no share {robot}")
+        part = parts[robot]
+        length = legs_length(part.legs)
+        tour = msgspec.structs.replace(
+            self.tour,
+            order=part.order,
+            length=length,
+            method=f"robot {robot} of {len(parts)} ({self.tour.method}, split {self.fleet.status})",
+            nn_length=length,  # the whole tour's baselines and bound are not this share's
+            nn_order=part.order,
+            length_by_nav={},
+            bound=None,
+        )
+        return msgspec.structs.replace(
+            self,
+            selected=[c for c in part.order if c != 0],
+            legs=part.legs,
+            tour=tour,
+            survey=part.survey,
+            share=robot,
+        )
 
     def legs_scan_ids(self) -> list[int]:
         """The scan ids in tour order (the legs that end at a location)."""

@@ -10,7 +10,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import msgspec
+
 from common import keys
+from common.config import ConfigError, load_manifest
+from common.keys import NAMESPACE_RE
 from common.messages.mission import (
     FINAL_PHASES,
     MissionAbort,
@@ -23,6 +27,7 @@ from common.messages.mission import (
     MissionState,
     MissionStatusQuery,
 )
+from common.messages.plan import PlanResult
 from common.transport import Bus, RpcError
 
 
@@ -30,6 +35,15 @@ def add_mission_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("action", choices=["start", "pause", "resume", "abort", "status"])
     p.add_argument("--field", default="", help="the deployment's field (default: its own)")
     p.add_argument("--plan-file", default="", help="a plan.json on the mission's host")
+    p.add_argument(
+        "--plan", type=Path, default=None, help="a plan.json here, sent with the command"
+    )
+    p.add_argument(
+        "--robot",
+        default=None,
+        metavar="NAMESPACE",
+        help="the robot to command, by its namespace (default: the manifest's)",
+    )
     p.add_argument("--name", default="", help="mission name (default: field and time)")
     p.add_argument("--manifest", type=Path, default=None)
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
@@ -55,20 +69,27 @@ def describe(s: MissionState) -> str:
 def cmd_mission(args: argparse.Namespace) -> int:
     from common.client import connect_or_explain
 
+    prog = f"phenorover mission {args.action}"
+    try:
+        plan = None if args.plan is None else read_plan(args.plan)
+        namespace = robot_namespace(args.robot, args.manifest)
+    except (ValueError, ConfigError) as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
+    start = MissionStart(mission=args.name, field=args.field, plan_file=args.plan_file, plan=plan)
     commands: dict[str, MissionCommand] = {
-        "start": MissionStart(mission=args.name, field=args.field, plan_file=args.plan_file),
+        "start": start,
         "pause": MissionPause(),
         "resume": MissionResume(),
         "abort": MissionAbort(),
         "status": MissionStatusQuery(),
     }
     cmd = commands[args.action]
-    prog = f"phenorover mission {args.action}"
     session = connect_or_explain(prog, args.manifest, args.connect, service="mission")
     if session is None:
         return 2  # the line saying which endpoint could not be reached is printed
     with session:
-        bus = Bus(session, "cli")
+        bus = Bus(session, "cli", namespace=namespace)
         try:
             print(describe(bus.call(keys.MISSION_CMD, cmd, timeout=330)))
         except RpcError as exc:
@@ -77,6 +98,28 @@ def cmd_mission(args: argparse.Namespace) -> int:
         finally:
             bus.close()
     return 0
+
+
+def read_plan(path: Path) -> PlanResult:
+    """A plan.json (``phenorover plan``'s), ValueError naming the file and the fault."""
+    try:
+        return msgspec.json.decode(path.read_bytes(), type=PlanResult)
+    except OSError as exc:
+        raise ValueError(f"--plan {path}: {exc.strerror}") from None
+    except msgspec.DecodeError as exc:
+        raise ValueError(f"--plan {path}: not a plan ({exc})") from None
+
+
+def robot_namespace(robot: str | None, manifest: Path | None) -> str:
+    """The namespace of the robot a command is for: ``--robot``, else the manifest's
+    (:mod:`common.keys`). ValueError for one that cannot be a key's chunk."""
+    if robot is None:
+        from common.client import DEFAULT_MANIFEST
+
+        return load_manifest(manifest or DEFAULT_MANIFEST).namespace
+    if not NAMESPACE_RE.fullmatch(robot):
+        raise ValueError(f"--robot {robot!r}: a namespace is up to 32 letters, digits, - or _")
+    return robot
 
 
 def add_command(p: argparse.ArgumentParser) -> None:

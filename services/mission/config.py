@@ -54,6 +54,10 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     routes and the time at a location the plan's time and swaps are estimated with
     (:class:`common.battery.Pace`); the swaps themselves follow what the battery
     reports.
+
+    ``share``: this robot's share (1..N) of a plan split between N robots
+    (``phenorover plan --robots N``); 0, alone, surveys the whole plan, and a split
+    plan is refused.
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)
@@ -84,3 +88,4 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     swapped_at: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.9
     origin_radius_m: Pos = 2.0
     pace: Pace = msgspec.field(default_factory=Pace)
+    share: Annotated[int, msgspec.Meta(ge=0, le=64)] = 0

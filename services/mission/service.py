@@ -172,7 +172,7 @@ class MissionService:
             raise
 
     def _start_planned(self, cmd: MissionStart) -> None:
-        plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s, self.cfg.pace)
+        plan = requested_plan(self.ctx, cmd, self.cfg.plan_timeout_s, self.cfg.pace, self.cfg.share)
         name, log, segs = new_mission(self.ctx, plan, cmd.mission)
         self.plan = plan
         self._launch(name, log, segs)

@@ -27,9 +27,44 @@ from services.mission.plan import Segment, segments
 from services.mission.runfiles import write_run_files
 
 
-def requested_plan(ctx: Context, cmd: MissionStart, timeout: float, pace: Pace) -> PlanResult:
-    """The plan ``cmd`` asks for, at ``pace`` (its time and swaps); RequestError naming
-    the field at fault."""
+def requested_plan(
+    ctx: Context, cmd: MissionStart, timeout: float, pace: Pace, share: int = 0
+) -> PlanResult:
+    """The plan ``cmd`` asks for, at ``pace`` (its time and swaps), and of a plan split
+    between robots this robot's ``share`` (:func:`own_share`); RequestError naming the
+    field at fault."""
+    plan = _plan(ctx, cmd, timeout, pace)
+    if (cmd.plan is not None or cmd.plan_file) and not surveys_field(ctx.field, plan):
+        what = "MissionStart.plan" if cmd.plan is not None else "MissionStart.plan_file"
+        raise RequestError(f"{what}: a plan of field {plan.field}, not of this deployment's")
+    return own_share(plan, share)
+
+
+def own_share(plan: PlanResult, share: int) -> PlanResult:
+    """What this robot surveys of ``plan``: the plan, or with ``share`` k its share of
+    a plan split between robots (``phenorover plan --robots N``). RequestError when
+    the two disagree: a split plan surveyed whole would scan every location twice."""
+    if share == 0:
+        if plan.fleet is not None and plan.share is None:
+            n = len(plan.fleet.parts)
+            raise RequestError(
+                f"the plan is split between {n} robots: set this robot's share "
+                f"([services.mission] share, 1..{n})"
+            )
+        return plan
+    if plan.share is not None:
+        if plan.share != share:
+            raise RequestError(f"the plan is robot {plan.share}'s share, this robot's is {share}")
+        return plan
+    try:
+        return plan.share_of(share)
+    except ValueError as exc:
+        raise RequestError(f"[services.mission] share {share}: {exc}") from None
+
+
+def _plan(ctx: Context, cmd: MissionStart, timeout: float, pace: Pace) -> PlanResult:
+    if cmd.plan is not None:
+        return cmd.plan
     field = ctx.field
     if cmd.field and cmd.field != field and Path(cmd.field).resolve() != Path(field).resolve():
         # one field for the whole deployment: the simulated world, the planner and

@@ -14,6 +14,7 @@ import sys
 import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zenoh
@@ -115,7 +116,7 @@ return_to_origin = {str(home).lower()}
         assert wait_alive(self.session, SERVICES, timeout=60), "deployment did not come up"
         self.state = self.bus.latest(keys.MISSION_STATE)
 
-    def start(self, **kw: str) -> MissionState:
+    def start(self, **kw: Any) -> MissionState:
         deadline = time.monotonic() + 60
         while True:
             try:
