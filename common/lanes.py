@@ -1,0 +1,83 @@
+"""A field's lanes cut into segments, the unit robots sharing a field reserve.
+
+A *lane segment* is a stretch of one lane between two neighbouring lane
+intersections (:mod:`common.field`): of a cross lane between two row-gap lanes, or of
+a row-gap lane between two cross lanes, as the lane graph of Open-RMF's traffic
+schedule has its lanes between waypoints. Only the lanes the survey drives are cut:
+with ``aha`` navigation (the default) every cross lane and the two field-edge lanes,
+with ``br`` every lane.
+
+A robot is *in* a segment when its body reaches the segment's centre line: its
+centre within ``radius`` of it (half the footprint's diagonal). At an intersection a
+robot is in every segment that meets there, so two robots in one segment are closer
+than a segment's length and one of them would have to pass the other: the
+reservations (:mod:`services.mission.lanes`) keep that from happening, and the
+evaluation checks it on the robots' true positions. Pure.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.arrays import F64
+from common.field import Field
+from common.messages.nav import Leg
+
+# how finely a leg is walked to find the segments it passes (m): well under any radius
+STEP_M = 0.05
+
+
+class LaneMap:
+    """The lane segments of ``field`` under navigation mode ``nav``: ``ids`` (``c<k>.<j>``
+    cross lane k between row-gap lanes j and j+1; ``r<j>.<k>`` row-gap lane j between
+    cross lanes k and k+1) and their end points ``ends`` (S, 4: x0, y0, x1, y1)."""
+
+    def __init__(self, field: Field, nav: str = "aha") -> None:
+        xs, ys = field.cross_lanes_x, field.row_lanes_y
+        rows = range(len(ys)) if nav == "br" else sorted({0, len(ys) - 1})
+        ids: list[str] = []
+        ends: list[tuple[float, float, float, float]] = []
+        for k, x in enumerate(xs):
+            for j in range(len(ys) - 1):
+                ids.append(f"c{k}.{j}")
+                ends.append((float(x), float(ys[j]), float(x), float(ys[j + 1])))
+        for j in rows:
+            for k in range(len(xs) - 1):
+                ids.append(f"r{j}.{k}")
+                ends.append((float(xs[k]), float(ys[j]), float(xs[k + 1]), float(ys[j])))
+        self.ids = ids
+        self.ends: F64 = np.asarray(ends, dtype=np.float64).reshape(-1, 4)
+
+    def distances(self, xy: F64) -> F64:
+        """(N, S): from each point of ``xy`` (N, 2) to each segment's centre line."""
+        p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        a, b = self.ends[:, :2], self.ends[:, 2:]
+        ab = b - a
+        t = ((p[:, None, :] - a[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1)[None]
+        closest = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+        out: F64 = np.hypot(*(p[:, None, :] - closest).transpose(2, 0, 1))
+        return out
+
+    def at(self, xy: F64, radius: float) -> list[set[str]]:
+        """For each point of ``xy``, the segments a robot there is in."""
+        near = self.distances(xy) <= radius
+        return [{self.ids[s] for s in np.flatnonzero(row)} for row in near]
+
+    def along(self, legs: list[Leg], radius: float) -> set[str]:
+        """Every segment a robot following ``legs`` is in at some point of them."""
+        pts = [np.array([[g.x0, g.y0]]) for g in legs[:1]]
+        for g in legs:
+            n = max(1, math.ceil(g.length / STEP_M))
+            t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+            pts.append(np.array([g.x0, g.y0]) + t * np.array([g.x1 - g.x0, g.y1 - g.y0]))
+        if not pts:
+            return set()
+        near = (self.distances(np.concatenate(pts)) <= radius).any(axis=0)
+        return {self.ids[s] for s in np.flatnonzero(near)}
+
+
+def footprint_radius(length: float, width: float) -> float:
+    """Half the diagonal of a robot's footprint: how far its body reaches from its centre."""
+    return 0.5 * math.hypot(length, width)

@@ -1,0 +1,48 @@
+"""A field's lanes cut into the segments robots reserve."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from common.field import load_field
+from common.lanes import LaneMap, footprint_radius
+from common.messages.nav import Leg
+
+
+@pytest.fixture(scope="module")
+def engr() -> LaneMap:
+    _, fld = load_field("engr")
+    return LaneMap(fld, "aha")
+
+
+def test_aha_cuts_every_cross_lane_and_the_two_edge_lanes() -> None:
+    _, fld = load_field("engr")
+    nx, ny = len(fld.cross_lanes_x), len(fld.row_lanes_y)
+    aha, br = LaneMap(fld, "aha"), LaneMap(fld, "br")
+    assert len(aha.ids) == nx * (ny - 1) + 2 * (nx - 1)
+    assert len(br.ids) == nx * (ny - 1) + ny * (nx - 1)
+    assert len(set(br.ids)) == len(br.ids)
+
+
+def test_a_robot_at_an_intersection_is_in_every_segment_meeting_there(engr: LaneMap) -> None:
+    _, fld = load_field("engr")
+    x, y = fld.cross_lanes_x[0], fld.row_lanes_y[0]  # a corner: two segments meet
+    r = footprint_radius(0.99, 0.67)
+    assert engr.at(np.array([[x, y]]), r) == [{"c0.0", "r0.0"}]
+    mid = 0.5 * (fld.row_lanes_y[1] + fld.row_lanes_y[2])  # halfway along cross lane 2
+    assert engr.at(np.array([[fld.cross_lanes_x[2], mid]]), r) == [{"c2.1"}]
+    # the distance to a centre line is the perpendicular one
+    d = engr.distances(np.array([[fld.cross_lanes_x[2] + 0.3, mid]]))
+    assert d[0, engr.ids.index("c2.1")] == pytest.approx(0.3)
+
+
+def test_a_leg_along_a_cross_lane_passes_its_segments_and_the_ends(engr: LaneMap) -> None:
+    _, fld = load_field("engr")
+    x, ys = float(fld.cross_lanes_x[3]), fld.row_lanes_y
+    leg = Leg(x0=x, y0=float(ys[0]), x1=x, y1=float(ys[2]))
+    got = engr.along([leg], 0.6)
+    # the lane's first two segments, the next one meeting at its end, and the edge
+    # lane's on either side of its start
+    assert got == {"c3.0", "c3.1", "c3.2", "r0.2", "r0.3"}
+    assert engr.along([], 0.6) == set()
