@@ -109,13 +109,16 @@ class VisibilitySummary(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class FleetPart(msgspec.Struct, frozen=True, kw_only=True):
-    """One robot's share of a survey: ``order`` its tour (candidate ids, 0 the Origin
-    first and last), ``legs`` the legs of it, ``survey`` its time with its swaps."""
+    """One robot's share of a survey: ``order`` its tour (candidate ids, 0 its home
+    first and last), ``legs`` the legs of it, from and back to ``home`` (where the
+    robot parks, off the lanes: :mod:`services.planner.fleet`), ``survey`` its time
+    with its swaps."""
 
     robot: Annotated[int, msgspec.Meta(ge=1)]
     order: list[int]
     legs: list[Leg]
     survey: Estimate
+    home: tuple[Coordinate, Coordinate]
 
 
 class Fleet(msgspec.Struct, frozen=True, kw_only=True):

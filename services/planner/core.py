@@ -147,7 +147,7 @@ def plan(
     shares = None
     if opt.robots > 1:
         t = time.perf_counter()
-        shares = fleet(nav, pts, ids, dist, via, battery or Battery(), opt, survey.time_s)
+        shares = fleet(nav, pts, ids, via, battery or Battery(), opt, survey.time_s)
         timings["fleet"] = time.perf_counter() - t
 
     def as_ids(order: list[int]) -> list[int]:

@@ -1,15 +1,24 @@
 """The chosen locations split between several robots so that the slowest finishes
-first: OR-Tools routing with one vehicle per robot, all leaving from and returning to
-the Origin, on a time dimension (the lane distance at the survey's pace, plus each
-location's time) whose global span is the cost to minimise. Pure.
+first: OR-Tools routing with one vehicle per robot, each leaving from and returning to
+its own lane intersection (:func:`homes`), on a time dimension (the lane distance at
+the survey's pace, plus each location's time) whose global span is the cost to
+minimise. Pure.
 
 The split balances time, not distance: a location costs its positioning and scan
-whoever takes it, so a robot with the far locations takes fewer of them."""
+whoever takes it, so a robot with the far locations takes fewer of them.
+
+Each robot of a fleet parks off the lanes, beside the field's edge lane (its
+*home*): robot k's home faces the edge lane's intersection 2(k-1) cross lanes from
+the Origin, ``PARK_M`` outside it. A robot at home is in no lane segment
+(:mod:`common.lanes`), so one that has finished, or waits there, never stands in
+another's way; its tour starts and ends with the short leg between its home and its
+intersection."""
 
 from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import time
 
 import numpy as np
@@ -26,6 +35,12 @@ from services.planner.waypoints import tour_legs
 
 # routing works in integers: deciseconds
 _SCALE = 10.0
+# how far outside the edge lane's centre line a fleet robot parks (m): beyond the
+# reach of a Husky's body (0.6 m) and the reservations' margin
+PARK_M = 1.5
+# how many cross lanes apart the robots' home intersections are: at neighbouring
+# intersections both robots would be in the lane segment between them
+HOME_STRIDE = 2
 # the weight of the span (the slowest robot's time) against the sum of times: large, so
 # the span comes first and the total breaks its ties
 SPAN_WEIGHT = 100
@@ -54,22 +69,31 @@ def tour_time(d: F64, order: list[int], pace: Pace) -> float:
     return pace.drive_s(metres) + pace.location_s * (len(order) - 1)
 
 
-def split_tours(d: F64, robots: int, pace: Pace, time_limit_s: float = 10.0) -> Split:
-    """Tours of ``robots`` robots over the nodes of ``d`` (node 0 the Origin, every
-    other node a location visited by exactly one robot) minimising the slowest one's
-    time. Raises ValueError when there are more robots than locations."""
+def split_tours(
+    d: F64, robots: int, pace: Pace, time_limit_s: float = 10.0, depots: int = 1
+) -> Split:
+    """Tours of ``robots`` robots over the nodes of ``d`` minimising the slowest one's
+    time. The first ``depots`` nodes are where tours start and end: node 0 for every
+    robot, or with ``depots == robots`` node r for robot r; every other node is a
+    location visited by exactly one robot. Raises ValueError when there are more
+    robots than locations."""
     t0 = time.perf_counter()
     n = d.shape[0]
-    if robots < 1 or robots > n - 1:
-        raise ValueError(f"{robots} robots for {n - 1} locations: at most one robot a location")
+    if depots not in (1, robots):
+        raise ValueError(f"{depots} depots for {robots} robots: one, or one a robot")
+    if robots < 1 or robots > n - depots:
+        raise ValueError(
+            f"{robots} robots for {n - depots} locations: at most one robot a location"
+        )
     if robots == 1 or n <= 2:
         order = list(range(n))
         return Split([order], [tour_time(d, order, pace)], "trivial", time.perf_counter() - t0)
     at = np.full(n, pace.location_s)
-    at[0] = 0.0
+    at[:depots] = 0.0
     # the time of an arc: the drive, then the location's time at its end
     cost = np.rint((d / pace.speed + at[None, :]) * _SCALE).astype(np.int64).tolist()
-    manager = pywrapcp.RoutingIndexManager(n, robots, 0)
+    ends = list(range(robots)) if depots > 1 else [0] * robots
+    manager = pywrapcp.RoutingIndexManager(n, robots, ends, ends)
     routing = pywrapcp.RoutingModel(manager)
     cb = routing.RegisterTransitMatrix(cost)
     routing.SetArcCostEvaluatorOfAllVehicles(cb)
@@ -101,32 +125,72 @@ def check_lanes(nav: Navigator, robots: int) -> None:
         )
 
 
+def homes(nav: Navigator, origin: F64, robots: int) -> tuple[F64, F64]:
+    """(access, home), each (robots, 2): robot k's lane intersection on the Origin's
+    edge lane, ``HOME_STRIDE`` cross lanes apart from the Origin's inwards, and its
+    parking place ``PARK_M`` outside the field beyond it. ValueError, one line, when
+    the edge lane has too few intersections for them."""
+    k0 = int(np.argmin(np.abs(nav.xs - origin[0])))
+    j0 = int(np.argmin(np.abs(nav.ys - origin[1])))
+    inward = 1 if k0 == 0 else -1
+    ks = [k0 + inward * HOME_STRIDE * r for r in range(robots)]
+    if not all(0 <= k < len(nav.xs) for k in ks):
+        raise ValueError(
+            f"PlanOptions.robots: {robots} robots park {HOME_STRIDE} cross lanes apart along "
+            f"the edge lane, and the field has {len(nav.xs)} cross lanes"
+        )
+    access = np.array([[nav.xs[k], nav.ys[j0]] for k in ks], dtype=np.float64)
+    outward = -1.0 if j0 == 0 else 1.0
+    return access, access + np.array([0.0, outward * PARK_M])
+
+
+def _with_home(legs: list[Leg], home: F64) -> list[Leg]:
+    """``legs`` (a closed tour from a home intersection) from and back to ``home``."""
+    hx, hy = float(home[0]), float(home[1])
+    if not legs:
+        return []
+    first, last = legs[0], legs[-1]
+    out_yaw = math.atan2(first.y1 - first.y0, first.x1 - first.x0) if first.length else None
+    back_yaw = math.atan2(last.y1 - hy, last.x1 - hx)  # parked facing its intersection
+    return [
+        Leg(x0=hx, y0=hy, x1=first.x0, y1=first.y0, final_yaw=out_yaw),
+        *legs,
+        Leg(x0=last.x1, y0=last.y1, x1=hx, y1=hy, final_yaw=back_yaw),
+    ]
+
+
 def fleet(
     nav: Navigator,
     pts: F64,
     ids: list[int | None],
-    dist: F64,
     via: dict[int, list[Leg]],
     battery: Battery,
     opt: PlanOptions,
     one_robot_s: float,
 ) -> Fleet:
     """The survey of ``pts`` (the Origin first) split between ``opt.robots`` robots,
-    each part's legs and time with its swaps."""
+    each from and back to its home (:func:`homes`), each part's legs and time with
+    its swaps."""
     check_lanes(nav, opt.robots)
+    access, parked = homes(nav, pts[0], opt.robots)
+    n = opt.robots
+    pts = np.vstack([access, pts[1:]])
+    ids = [*([None] * n), *ids[1:]]
     # guided local search runs to its limit, however small the problem: a second and a
     # tenth of a second a location, at most the tour's own limit
-    limit = min(opt.tour_time_limit_s, 1.0 + 0.1 * (len(pts) - 1))
-    split = split_tours(dist, opt.robots, opt.pace, limit)
+    limit = min(opt.tour_time_limit_s, 1.0 + 0.1 * (len(pts) - n))
+    split = split_tours(nav.distances(pts), n, opt.pace, limit, depots=n)
     parts = []
     for r, order in enumerate(split.orders):
         legs = tour_legs(nav, pts, order, ids) if len(order) > 1 else []
+        legs = _with_home(legs, parked[r])
         parts.append(
             FleetPart(
                 robot=r + 1,
-                order=[0 if k == 0 else int(ids[k] or 0) for k in order] + [0],
+                order=[0 if k < n else int(ids[k] or 0) for k in order] + [0],
                 legs=legs,
                 survey=survey_estimate(legs, via, battery, opt.pace),
+                home=(float(parked[r][0]), float(parked[r][1])),
             )
         )
     return Fleet(parts=parts, one_robot_s=one_robot_s, status=split.status, time_s=split.time_s)

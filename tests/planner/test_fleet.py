@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from common.battery import Pace
-from common.field import load_field
+from common.field import build_field, load_field
+from common.lanes import LaneMap, footprint_radius
 from common.messages.plan import PlanOptions
 from phenorover.cli import main
 from phenorover.eval.fields import engr_sized
@@ -61,10 +62,17 @@ def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
     assert r.fleet is not None and len(r.fleet.parts) == 2
     taken = sorted(i for p in r.fleet.parts for i in p.order if i != 0)
     assert taken == sorted(r.selected)
+    lanes = LaneMap(build_field(layout), r.tour.nav)
+    radius = footprint_radius(2 * layout.robot_half_length, 2 * layout.robot_half_width)
     for p in r.fleet.parts:
         assert [g.scan_id for g in p.legs if g.scan_id is not None] == p.order[1:-1]
-        assert (p.legs[0].x0, p.legs[0].y0) == pytest.approx(r.origin)
-        assert (p.legs[-1].x1, p.legs[-1].y1) == pytest.approx(r.origin)
+        assert (p.legs[0].x0, p.legs[0].y0) == pytest.approx(p.home)
+        assert (p.legs[-1].x1, p.legs[-1].y1) == pytest.approx(p.home)
+        # parked off the lanes: a robot at home stands in nobody's way
+        assert lanes.at(np.array([p.home]), radius + 0.5) == [set()]
+    # each robot its own home, and the first on the Origin's cross lane
+    one, two = (p.home for p in r.fleet.parts)
+    assert one[0] == pytest.approx(r.origin[0]) and abs(two[0] - one[0]) > 2 * radius
     assert r.survey is not None and r.fleet.one_robot_s == r.survey.time_s
     assert r.fleet.makespan_s <= 0.6 * r.fleet.one_robot_s
     # each robot's waypoints beside the tour's
