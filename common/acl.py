@@ -143,9 +143,11 @@ ROLES: dict[Role, Grants] = {
             keys.MISSION_PLAN,
         ),
         # mission drives nav and the scanner and asks the planner; the robot's CLI
-        # commands missions
-        calls=_keys(keys.NAV_CMD, keys.SCANNER_CMD, keys.PLANNER_PLAN, keys.MISSION_CMD),
-        serves=_keys(keys.NAV_CMD, keys.MISSION_CMD),
+        # commands missions; robots sharing a field ask each other's lane reservations
+        calls=_keys(
+            keys.NAV_CMD, keys.SCANNER_CMD, keys.PLANNER_PLAN, keys.MISSION_CMD, keys.FLEET_LANES
+        ),
+        serves=_keys(keys.NAV_CMD, keys.MISSION_CMD, keys.FLEET_LANES),
     ),
     "jetson": Grants(publishes=_keys(keys.SCANNER_STATUS), serves=_keys(keys.SCANNER_CMD)),
     "basestation": Grants(

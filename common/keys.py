@@ -138,6 +138,11 @@ MISSION_CMD = Rpc[mission.MissionCommand, mission.MissionState](
     _k("rpc/mission/cmd"), mission.MissionCommand, mission.MissionState
 )
 
+# robots sharing a field: each mission's lane reservations, asked by the others
+FLEET_LANES = Rpc[mission.LaneQuery, mission.LaneClaims](
+    _k("rpc/fleet/lanes/{robot}"), mission.LaneQuery, mission.LaneClaims
+)
+
 ALL_TOPICS: tuple[Topic[Any], ...] = (
     HEALTH,
     SIM_CLOCK,
@@ -168,9 +173,17 @@ ALL_TOPICS: tuple[Topic[Any], ...] = (
 TOPICS: dict[str, type] = {t.key: t.type for t in ALL_TOPICS}
 
 # What a site shares however many robots survey it: the simulated world's clock, its
-# run and its lockstep (participants named ``<namespace>.<service>``), and the
-# planner, one per base station. Liveliness tokens name their machine already.
-SITE: tuple[str, ...] = (SIM_CLOCK.key, SIM_RUN.key, PLANNER_PLAN.key, SIM_ACK.key, LOCKSTEP)
+# run and its lockstep (participants named ``<namespace>.<service>``), the planner,
+# one per base station, and the robots' lane reservations (named by robot).
+# Liveliness tokens name their machine already.
+SITE: tuple[str, ...] = (
+    SIM_CLOCK.key,
+    SIM_RUN.key,
+    PLANNER_PLAN.key,
+    SIM_ACK.key,
+    LOCKSTEP,
+    FLEET_LANES.key,
+)
 _SITE_RE = re.compile("|".join(re.sub(r"\\\{[^}]*\\\}", "[^/]+", re.escape(k)) for k in SITE))
 # a namespace is one chunk of a key: no slash, no wildcard, nothing Zenoh reserves
 NAMESPACE_RE = re.compile(r"^[A-Za-z0-9_-]{0,32}$")
@@ -191,5 +204,14 @@ def participant(name: str, namespace: str) -> str:
 
 RPCS: dict[str, tuple[Any, type]] = {
     r.key: (r.request, r.reply)
-    for r in (PING, NAV_CMD, SCANNER_CMD, MISSION_CMD, SIM_RENDER, SIM_RUN, PLANNER_PLAN)
+    for r in (
+        PING,
+        NAV_CMD,
+        SCANNER_CMD,
+        MISSION_CMD,
+        SIM_RENDER,
+        SIM_RUN,
+        PLANNER_PLAN,
+        FLEET_LANES,
+    )
 }

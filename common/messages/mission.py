@@ -98,3 +98,18 @@ class MissionEvent(Message, frozen=True, kw_only=True):
     mission: str
     level: str
     text: str
+
+
+class LaneQuery(msgspec.Struct, frozen=True, kw_only=True):
+    """What lane segments do you hold and want? (asked by the other robots' missions)."""
+
+    robot: str  # the asker's namespace, for the answerer's log
+
+
+class LaneClaims(Message, frozen=True, kw_only=True):
+    """A robot's lane reservations (:mod:`services.mission.lanes`): the segments
+    (:mod:`common.lanes`) it ``held`` and those it ``wanted`` when it answered."""
+
+    robot: str
+    held: list[str] = msgspec.field(default_factory=list)
+    wanted: list[str] = msgspec.field(default_factory=list)

@@ -13,6 +13,22 @@ def _profile() -> ScanProfile:
     return ScanProfile(scan_id=1, resolution=8, quality=2)
 
 
+class LanesConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Lane reservations with the robots sharing the field (:mod:`services.mission.lanes`):
+    ``peers`` their namespaces (none: this robot surveys alone, and reserves nothing).
+    ``margin_m``: how far beyond its body's reach a robot may stray from its route (the
+    tracking error and the estimate's), reserved with it. A peer is asked every
+    ``retry_s`` (the mission's clock) while the answer is to wait, and one silent for
+    ``answer_timeout_s`` (wall) has not answered."""
+
+    peers: list[Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]] = msgspec.field(
+        default_factory=list
+    )
+    margin_m: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.3
+    retry_s: Pos = 1.0
+    answer_timeout_s: Pos = 2.0
+
+
 class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The survey supervisor. Times are on the service's clock (sim time in simulation).
 
@@ -57,7 +73,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
 
     ``share``: this robot's share (1..N) of a plan split between N robots
     (``phenorover plan --robots N``); 0, alone, surveys the whole plan, and a split
-    plan is refused.
+    plan is refused. ``lanes``: the reservations with the robots sharing the field.
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)
@@ -89,3 +105,4 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     origin_radius_m: Pos = 2.0
     pace: Pace = msgspec.field(default_factory=Pace)
     share: Annotated[int, msgspec.Meta(ge=0, le=64)] = 0
+    lanes: LanesConfig = msgspec.field(default_factory=LanesConfig)

@@ -31,6 +31,7 @@ from common.transport import RequestError, RpcError
 from services.mission.battery import BatteryWatch
 from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted, Feeds
+from services.mission.lanes import Lanes
 from services.mission.log import MissionLog
 from services.mission.plan import Segment, segments
 from services.mission.registration import RegistrationJob, start_registration
@@ -67,6 +68,8 @@ class MissionService:
         self._starting = threading.Lock()
         # the survey's feeds, subscribed once for every survey this service runs
         self.feeds = Feeds(bus)
+        # the robots sharing the field ask this one's lane reservations at any time
+        self.lanes = Lanes(ctx, cfg.lanes) if cfg.lanes.peers else None
         # an interrupted mission is taken up before the first command is served: a
         # MissionStart arriving while the service starts is refused (the mission in
         # progress named), never run beside the resumed one
@@ -193,6 +196,7 @@ class MissionService:
             self._wake,
             self._abort,
             self._paused,
+            self.lanes,
         )
         self._worker = threading.Thread(target=self._run_mission, args=(segs,), daemon=True)
         self._worker.start()

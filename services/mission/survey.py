@@ -39,6 +39,7 @@ from common.service import Context
 from common.transport import RpcError, RpcTimeout
 from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted, Feeds
+from services.mission.lanes import Lanes
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
 from services.mission.scanning import Scans
@@ -63,8 +64,10 @@ class Survey:
         wake: threading.Event,
         abort: threading.Event,
         paused: threading.Event,
+        lanes: Lanes | None = None,
     ) -> None:
         self.ctx, self.cfg, self.log, self.event = ctx, cfg, log, event
+        self.lanes = lanes  # the reservations with robots sharing the field, if any
         self.mission = mission
         self.wake, self.abort, self.paused = wake, abort, paused
         self.pose, self.progress, self.scanner = feeds.pose, feeds.progress, feeds.scanner
@@ -147,9 +150,12 @@ class Survey:
 
     # --- driving ---
     def drive(self, seg: Segment, route_id: str) -> tuple[bool, str]:
-        """Follow ``seg`` (joined where the robot stands); (arrived, why not)."""
+        """Follow ``seg`` (joined where the robot stands), its lanes reserved first
+        when robots share the field; (arrived, why not)."""
         length = legs_length(seg.legs)
         limit_ns = int((self.cfg.route_time_s + length / self.cfg.route_min_speed) * NS)
+        if self.lanes is not None:
+            self.lanes.reserve(seg.legs, self.wait, lambda text: self.event("info", text))
         why = ""
         for attempt in range(self.cfg.blocked_retries + 1):
             # every route sent gets a new id: navigation keeps publishing an ended
@@ -158,6 +164,9 @@ class Survey:
             rid = f"{route_id}.{self._routes}"
             ok, why = self._follow(seg, rid, limit_ns)
             if ok:
+                if self.lanes is not None:
+                    x, y, _ = seg.end
+                    self.lanes.release_to(x, y)
                 return True, ""
             self.event("warning", f"{route_id}: {why} (attempt {attempt + 1})")
         return False, why

@@ -1,0 +1,143 @@
+"""A mission's lane reservations over Zenoh, with the robots sharing its field.
+
+Before each route the mission reserves every lane segment (:mod:`common.lanes`) the
+robot will be in along it (its body's reach plus ``margin_m`` for how far it may
+stray), as :mod:`.reservation` rules, asking each peer's mission on
+``rpc/fleet/lanes/<peer>``; at the route's end it keeps only the segments where it
+stands. It answers the peers' questions on its own key from the moment the service
+starts, whatever it is doing.
+
+What it holds and wants is written to ``<run_dir>/lanes-<namespace>.json`` before
+anyone can learn it (atomically, and before the robot moves into what it was granted),
+so a mission restarted mid-survey (a power cut, a crash) answers as it did before:
+the segments its robot stands in stay its own. While it is down its peers get no
+answer and wait, as they do across a partition: a robot that cannot confirm its
+reservation does not drive.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from common import keys
+from common.config import ConfigError
+from common.field import load_field
+from common.files import atomic_write
+from common.lanes import LaneMap, footprint_radius
+from common.messages.mission import LaneClaims, LaneQuery
+from common.messages.nav import Leg
+from common.service import Context
+from common.transport import RpcError
+from services.mission.config import LanesConfig
+from services.mission.reservation import Claims, decide
+
+log = logging.getLogger(__name__)
+
+
+class Lanes:
+    """This robot's side (``ctx.bus.namespace`` names it) of the reservations with
+    ``cfg.peers``; serves its claims from construction."""
+
+    def __init__(self, ctx: Context, cfg: LanesConfig) -> None:
+        self.ctx, self.cfg = ctx, cfg
+        self.me = ctx.bus.namespace
+        if not self.me:
+            raise ConfigError(
+                "[services.mission.lanes] peers: a robot sharing a field needs a namespace "
+                "(the manifest's namespace) to be told apart by"
+            )
+        _, fld = load_field(ctx.field)
+        self.map = LaneMap(fld)
+        fp = ctx.robot.footprint
+        self.reach = footprint_radius(fp.length, fp.width) + cfg.margin_m
+        self.path = Path(ctx.run_dir) / f"lanes-{self.me}.json"
+        self._lock = threading.Lock()
+        self.claims = self._load()
+        ctx.bus.serve(keys.FLEET_LANES.at(robot=self.me), self._answer)
+
+    def _load(self) -> Claims:
+        try:
+            saved = msgspec.json.decode(self.path.read_bytes(), type=LaneClaims)
+        except FileNotFoundError:
+            return Claims()
+        except (OSError, msgspec.DecodeError) as exc:
+            # what this robot held is unknown: holding every segment keeps the others
+            # out until its first route's reservation says where it is
+            self.ctx.log.warning("%s: unreadable (%s): holding every lane segment", self.path, exc)
+            return Claims(held=set(self.map.ids))
+        if saved.held or saved.wanted:
+            self.ctx.log.info(
+                "lane reservations carried on from %s: holding %s",
+                self.path,
+                ", ".join(saved.held) or "none",
+            )
+        return Claims(held=set(saved.held), wanted=set(saved.wanted))
+
+    def _save(self) -> None:
+        data = msgspec.json.encode(self.claims.answer(self.me))
+        atomic_write(self.path, lambda p: p.write_bytes(data))
+
+    def _answer(self, q: LaneQuery) -> LaneClaims:
+        with self._lock:
+            return self.claims.answer(self.me)
+
+    def _ask(self, peer: str) -> LaneClaims | None:
+        try:
+            return self.ctx.bus.call(
+                keys.FLEET_LANES.at(robot=peer),
+                LaneQuery(robot=self.me),
+                timeout=self.cfg.answer_timeout_s,
+            )
+        except RpcError:  # no answer, or one that cannot be read: it may hold anything
+            return None
+
+    def reserve(
+        self, legs: list[Leg], wait: Callable[[float], object], say: Callable[[str], None]
+    ) -> None:
+        """Hold every segment along ``legs`` (and those held already), waiting with
+        ``wait(seconds)`` (which raises to give up: an abort) until the peers allow
+        it; ``say`` is told once per reason to wait."""
+        want = self.map.along(legs, self.reach)
+        said = ""
+        while True:
+            with self._lock:
+                self.claims.wanted = want - self.claims.held
+                if not self.claims.wanted:
+                    break
+                self._save()  # wanted, and visible, before anyone is asked
+            answers = {p: self._ask(p) for p in self.cfg.peers}
+            verdict = decide(self.me, want, answers)
+            if verdict.granted:
+                with self._lock:
+                    self.claims.grant()
+                    self._save()  # held, on disk, before the robot moves into it
+                break
+            if verdict.why != said:
+                say(f"lanes: waiting, {verdict.why}")
+                said = verdict.why
+            if verdict.back_off:
+                with self._lock:
+                    self.claims.wanted = set()
+                    self._save()
+                wait(2 * self.cfg.retry_s)
+            else:
+                wait(self.cfg.retry_s)
+        if said:
+            say("lanes: reserved, driving on")
+
+    def release_to(self, x: float, y: float) -> None:
+        """Keep only the segments a robot at (x, y) is in."""
+        here = self.map.at(np.array([[x, y]]), self.reach)[0]
+        with self._lock:
+            self.claims.keep(here)
+            self._save()
+
+    def held(self) -> set[str]:
+        with self._lock:
+            return set(self.claims.held)
