@@ -3,9 +3,9 @@
 A *lane segment* is a stretch of one lane between two neighbouring lane
 intersections (:mod:`common.field`): of a cross lane between two row-gap lanes, or of
 a row-gap lane between two cross lanes, as the lane graph of Open-RMF's traffic
-schedule has its lanes between waypoints. Only the lanes the survey drives are cut:
-with ``aha`` navigation (the default) every cross lane and the two field-edge lanes,
-with ``br`` every lane.
+schedule has its lanes between waypoints. Every lane is cut, whichever lanes a
+survey drives (``aha`` navigation drives only the cross lanes and the field's edge
+lanes): a robot standing at an intersection reaches into the row-gap lanes too.
 
 A robot is *in* a segment when its body reaches the segment's centre line: its
 centre within ``radius`` of it (half the footprint's diagonal). At an intersection a
@@ -30,20 +30,19 @@ STEP_M = 0.05
 
 
 class LaneMap:
-    """The lane segments of ``field`` under navigation mode ``nav``: ``ids`` (``c<k>.<j>``
+    """The lane segments of ``field``: ``ids`` (``c<k>.<j>``
     cross lane k between row-gap lanes j and j+1; ``r<j>.<k>`` row-gap lane j between
     cross lanes k and k+1) and their end points ``ends`` (S, 4: x0, y0, x1, y1)."""
 
-    def __init__(self, field: Field, nav: str = "aha") -> None:
+    def __init__(self, field: Field) -> None:
         xs, ys = field.cross_lanes_x, field.row_lanes_y
-        rows = range(len(ys)) if nav == "br" else sorted({0, len(ys) - 1})
         ids: list[str] = []
         ends: list[tuple[float, float, float, float]] = []
         for k, x in enumerate(xs):
             for j in range(len(ys) - 1):
                 ids.append(f"c{k}.{j}")
                 ends.append((float(x), float(ys[j]), float(x), float(ys[j + 1])))
-        for j in rows:
+        for j in range(len(ys)):
             for k in range(len(xs) - 1):
                 ids.append(f"r{j}.{k}")
                 ends.append((float(xs[k]), float(ys[j]), float(xs[k + 1]), float(ys[j])))

@@ -13,16 +13,14 @@ from common.messages.nav import Leg
 @pytest.fixture(scope="module")
 def engr() -> LaneMap:
     _, fld = load_field("engr")
-    return LaneMap(fld, "aha")
+    return LaneMap(fld)
 
 
-def test_aha_cuts_every_cross_lane_and_the_two_edge_lanes() -> None:
+def test_every_lane_is_cut_between_neighbouring_intersections(engr: LaneMap) -> None:
     _, fld = load_field("engr")
     nx, ny = len(fld.cross_lanes_x), len(fld.row_lanes_y)
-    aha, br = LaneMap(fld, "aha"), LaneMap(fld, "br")
-    assert len(aha.ids) == nx * (ny - 1) + 2 * (nx - 1)
-    assert len(br.ids) == nx * (ny - 1) + ny * (nx - 1)
-    assert len(set(br.ids)) == len(br.ids)
+    assert len(engr.ids) == nx * (ny - 1) + ny * (nx - 1)
+    assert len(set(engr.ids)) == len(engr.ids)
 
 
 def test_a_robot_at_an_intersection_is_in_every_segment_meeting_there(engr: LaneMap) -> None:
@@ -32,6 +30,8 @@ def test_a_robot_at_an_intersection_is_in_every_segment_meeting_there(engr: Lane
     assert engr.at(np.array([[x, y]]), r) == [{"c0.0", "r0.0"}]
     mid = 0.5 * (fld.row_lanes_y[1] + fld.row_lanes_y[2])  # halfway along cross lane 2
     assert engr.at(np.array([[fld.cross_lanes_x[2], mid]]), r) == [{"c2.1"}]
+    inner = engr.at(np.array([[fld.cross_lanes_x[2], fld.row_lanes_y[1]]]), r)
+    assert inner == [{"c2.0", "c2.1", "r1.1", "r1.2"}]
     # the distance to a centre line is the perpendicular one
     d = engr.distances(np.array([[fld.cross_lanes_x[2] + 0.3, mid]]))
     assert d[0, engr.ids.index("c2.1")] == pytest.approx(0.3)
@@ -42,7 +42,7 @@ def test_a_leg_along_a_cross_lane_passes_its_segments_and_the_ends(engr: LaneMap
     x, ys = float(fld.cross_lanes_x[3]), fld.row_lanes_y
     leg = Leg(x0=x, y0=float(ys[0]), x1=x, y1=float(ys[2]))
     got = engr.along([leg], 0.6)
-    # the lane's first two segments, the next one meeting at its end, and the edge
-    # lane's on either side of its start
-    assert got == {"c3.0", "c3.1", "c3.2", "r0.2", "r0.3"}
+    # the lane's first two segments, the next one meeting at its end, and on either
+    # side of the lane the row-gap lanes' at each intersection passed
+    assert got == {"c3.0", "c3.1", "c3.2"} | {f"r{j}.{k}" for j in (0, 1, 2) for k in (2, 3)}
     assert engr.along([], 0.6) == set()

@@ -62,7 +62,7 @@ def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
     assert r.fleet is not None and len(r.fleet.parts) == 2
     taken = sorted(i for p in r.fleet.parts for i in p.order if i != 0)
     assert taken == sorted(r.selected)
-    lanes = LaneMap(build_field(layout), r.tour.nav)
+    lanes = LaneMap(build_field(layout))
     radius = footprint_radius(2 * layout.robot_half_length, 2 * layout.robot_half_width)
     for p in r.fleet.parts:
         assert [g.scan_id for g in p.legs if g.scan_id is not None] == p.order[1:-1]
