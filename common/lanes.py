@@ -12,7 +12,12 @@ centre within ``radius`` of it (half the footprint's diagonal). At an intersecti
 robot is in every segment that meets there, so two robots in one segment are closer
 than a segment's length and one of them would have to pass the other: the
 reservations (:mod:`services.mission.lanes`) keep that from happening, and the
-evaluation checks it on the robots' true positions. Pure.
+evaluation checks it on the robots' true positions.
+
+Robots sharing a field park off the lanes (:func:`homes`): robot k beside the
+field's edge lane, facing the edge lane's intersection 2(k-1) cross lanes from the
+Origin, ``PARK_M`` outside it. A robot at home is in no lane segment, so one that
+has finished, or waits there, is in nobody's way. Pure.
 """
 
 from __future__ import annotations
@@ -25,6 +30,12 @@ from common.arrays import F64
 from common.field import Field
 from common.messages.nav import Leg
 
+# how far outside the edge lane's centre line a robot of a fleet parks (m): beyond the
+# reach of a Husky's body (0.6 m) and the reservations' margin
+PARK_M = 1.5
+# how many cross lanes apart the robots' home intersections are: at neighbouring
+# intersections both robots would be in the lane segment between them
+HOME_STRIDE = 2
 # how finely a leg is walked to find the segments it passes (m): well under any radius
 STEP_M = 0.05
 
@@ -80,3 +91,23 @@ class LaneMap:
 def footprint_radius(length: float, width: float) -> float:
     """Half the diagonal of a robot's footprint: how far its body reaches from its centre."""
     return 0.5 * math.hypot(length, width)
+
+
+def homes(xs: F64, ys: F64, origin: F64, robots: int) -> tuple[F64, F64]:
+    """(access, home), each (robots, 2), for a field of cross lanes at ``xs`` and
+    row-gap lanes at ``ys`` surveyed from ``origin``: robot k's lane intersection on
+    the Origin's edge lane, ``HOME_STRIDE`` cross lanes apart from the Origin's
+    inwards, and its parking place ``PARK_M`` outside the field beyond it.
+    ValueError, one line, when the edge lane has too few intersections for them."""
+    k0 = int(np.argmin(np.abs(xs - origin[0])))
+    j0 = int(np.argmin(np.abs(ys - origin[1])))
+    inward = 1 if k0 == 0 else -1
+    ks = [k0 + inward * HOME_STRIDE * r for r in range(robots)]
+    if not all(0 <= k < len(xs) for k in ks):
+        raise ValueError(
+            f"{robots} robots park {HOME_STRIDE} cross lanes apart along "
+            f"the edge lane, and the field has {len(xs)} cross lanes"
+        )
+    access = np.array([[xs[k], ys[j0]] for k in ks], dtype=np.float64)
+    outward = -1.0 if j0 == 0 else 1.0
+    return access, access + np.array([0.0, outward * PARK_M])

@@ -1,18 +1,15 @@
 """The chosen locations split between several robots so that the slowest finishes
 first: OR-Tools routing with one vehicle per robot, each leaving from and returning to
-its own lane intersection (:func:`homes`), on a time dimension (the lane distance at
+its own lane intersection (:func:`common.lanes.homes`), on a time dimension (the lane distance at
 the survey's pace, plus each location's time) whose global span is the cost to
 minimise. Pure.
 
 The split balances time, not distance: a location costs its positioning and scan
 whoever takes it, so a robot with the far locations takes fewer of them.
 
-Each robot of a fleet parks off the lanes, beside the field's edge lane (its
-*home*): robot k's home faces the edge lane's intersection 2(k-1) cross lanes from
-the Origin, ``PARK_M`` outside it. A robot at home is in no lane segment
-(:mod:`common.lanes`), so one that has finished, or waits there, never stands in
-another's way; its tour starts and ends with the short leg between its home and its
-intersection."""
+Each robot of a fleet parks off the lanes (:func:`common.lanes.homes`), so one that
+has finished, or waits there, never stands in another's way; its tour starts and
+ends with the short leg between its home and its intersection."""
 
 from __future__ import annotations
 
@@ -26,6 +23,7 @@ from ortools.constraint_solver import pywrapcp
 
 from common.arrays import F64
 from common.battery import Battery, Pace
+from common.lanes import homes
 from common.messages.nav import Leg
 from common.messages.plan import Fleet, FleetPart, PlanOptions
 from services.planner.route import Navigator
@@ -35,12 +33,6 @@ from services.planner.waypoints import tour_legs
 
 # routing works in integers: deciseconds
 _SCALE = 10.0
-# how far outside the edge lane's centre line a fleet robot parks (m): beyond the
-# reach of a Husky's body (0.6 m) and the reservations' margin
-PARK_M = 1.5
-# how many cross lanes apart the robots' home intersections are: at neighbouring
-# intersections both robots would be in the lane segment between them
-HOME_STRIDE = 2
 # the weight of the span (the slowest robot's time) against the sum of times: large, so
 # the span comes first and the total breaks its ties
 SPAN_WEIGHT = 100
@@ -125,25 +117,6 @@ def check_lanes(nav: Navigator, robots: int) -> None:
         )
 
 
-def homes(nav: Navigator, origin: F64, robots: int) -> tuple[F64, F64]:
-    """(access, home), each (robots, 2): robot k's lane intersection on the Origin's
-    edge lane, ``HOME_STRIDE`` cross lanes apart from the Origin's inwards, and its
-    parking place ``PARK_M`` outside the field beyond it. ValueError, one line, when
-    the edge lane has too few intersections for them."""
-    k0 = int(np.argmin(np.abs(nav.xs - origin[0])))
-    j0 = int(np.argmin(np.abs(nav.ys - origin[1])))
-    inward = 1 if k0 == 0 else -1
-    ks = [k0 + inward * HOME_STRIDE * r for r in range(robots)]
-    if not all(0 <= k < len(nav.xs) for k in ks):
-        raise ValueError(
-            f"PlanOptions.robots: {robots} robots park {HOME_STRIDE} cross lanes apart along "
-            f"the edge lane, and the field has {len(nav.xs)} cross lanes"
-        )
-    access = np.array([[nav.xs[k], nav.ys[j0]] for k in ks], dtype=np.float64)
-    outward = -1.0 if j0 == 0 else 1.0
-    return access, access + np.array([0.0, outward * PARK_M])
-
-
 def _with_home(legs: list[Leg], home: F64) -> list[Leg]:
     """``legs`` (a closed tour from a home intersection) from and back to ``home``."""
     hx, hy = float(home[0]), float(home[1])
@@ -169,10 +142,10 @@ def fleet(
     one_robot_s: float,
 ) -> Fleet:
     """The survey of ``pts`` (the Origin first) split between ``opt.robots`` robots,
-    each from and back to its home (:func:`homes`), each part's legs and time with
+    each from and back to its home (:func:`common.lanes.homes`), each part's legs and time with
     its swaps."""
     check_lanes(nav, opt.robots)
-    access, parked = homes(nav, pts[0], opt.robots)
+    access, parked = homes(nav.xs, nav.ys, pts[0], opt.robots)
     n = opt.robots
     pts = np.vstack([access, pts[1:]])
     ids = [*([None] * n), *ids[1:]]

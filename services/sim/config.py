@@ -15,13 +15,24 @@ from services.sim.world import WorldConfig
 Hz = Annotated[float, msgspec.Meta(gt=0, le=1000)]
 
 
+class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """One robot of a shared world (:mod:`services.sim.robots`): its ``namespace``
+    (its manifest's) and its ``start`` pose (x, y in m, yaw in deg; empty: its home
+    beside the field, facing the field)."""
+
+    namespace: Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]
+    start: tuple[float, float, float] | None = None
+
+
 class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The simulated world (the field is the deployment's ``field``).
 
     ``real_time_factor``: sim seconds per wall second. ``clock_hz``: the physics step
     and sim-clock rate (sim time); every sim-clock service advances in these steps.
     ``start``: the robot's start pose (x, y in m, yaw in deg) in the field frame;
-    empty = the field's origin corner facing along +x.
+    empty = the field's origin corner facing along +x. ``robots``: several robots
+    sharing the world, each in its namespace (:mod:`services.sim.robots`); empty:
+    one, with the plain keys.
     ``inclinometer_sd_deg``: the scanner's dual-axis compensator, 0.015 deg (FARO Focus
     S spec: compensator accuracy 0.015 deg).
     ``resume``: a simulator that died and is restarted within its deployment (same
@@ -65,6 +76,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     faults: list[Fault] = msgspec.field(default_factory=list)
     nice: Annotated[int, msgspec.Meta(ge=0, le=19)] = 10
     start_held: bool = False
+    robots: list[SimRobotConfig] = msgspec.field(default_factory=list)
 
 
 class SimCli:

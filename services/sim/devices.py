@@ -21,7 +21,7 @@ from services.sim.faults import FaultSchedule, describe
 from services.sim.imu import ImuModel
 from services.sim.lidar import beam_angles
 from services.sim.robot import RobotState
-from services.sim.world import World
+from services.sim.world import BoxObstacle, World
 
 
 class Devices:
@@ -33,17 +33,18 @@ class Devices:
         imu: ImuModel,
         faults: FaultSchedule,
         battery: SimBattery,
+        namespace: str = "",
     ) -> None:
         self.cfg, self.world, self.imu, self.faults = cfg, world, imu, faults
         self.battery = battery
         self.log: logging.Logger = ctx.log
-        bus = ctx.bus
-        self.truth_pub = bus.publisher(keys.SIM_TRUTH)
-        self.ant_pub = bus.publisher(keys.SIM_ANTENNAS)
-        self.enc_pub = bus.publisher(keys.SIM_ENCODERS)
-        self.lidar_pub = bus.publisher(keys.SIM_LIDAR)
-        self.imu_pub = bus.publisher(keys.SIM_IMU)
-        self.battery_pub = bus.publisher(keys.SIM_BATTERY)
+        bus, ns = ctx.bus, namespace  # the robot's devices, on its keys
+        self.truth_pub = bus.publisher(keys.SIM_TRUTH.within(ns))
+        self.ant_pub = bus.publisher(keys.SIM_ANTENNAS.within(ns))
+        self.enc_pub = bus.publisher(keys.SIM_ENCODERS.within(ns))
+        self.lidar_pub = bus.publisher(keys.SIM_LIDAR.within(ns))
+        self.imu_pub = bus.publisher(keys.SIM_IMU.within(ns))
+        self.battery_pub = bus.publisher(keys.SIM_BATTERY.within(ns))
         angles = beam_angles(cfg.world.lidar)
         self._lidar_meta = (
             float(angles[0]),
@@ -55,9 +56,17 @@ class Devices:
         n = max(1, round(self.cfg.clock_hz / hz))
         return k % n == 0
 
-    def publish(self, k: int, s: RobotState, t: int, rng: np.random.Generator) -> None:
+    def publish(
+        self,
+        k: int,
+        s: RobotState,
+        t: int,
+        rng: np.random.Generator,
+        others: tuple[BoxObstacle, ...] = (),
+    ) -> None:
         """What the devices sense at step ``k`` (sim time ``t``, the robot in ``s``);
-        the noise drawn from ``rng`` in a fixed order."""
+        the noise drawn from ``rng`` in a fixed order. ``others``: the other robots'
+        bodies, which the lidar sees."""
         for fault, started in self.faults.changes(t / NS):
             self.log.warning("%s", describe(fault, started))
         fx = self.faults.effects(t / NS)
@@ -107,7 +116,7 @@ class Devices:
                 )
             )
         if self._every(self.cfg.lidar_hz, k):
-            ranges = self.world.lidar_scan(s, rng, fx.obstacles)
+            ranges = self.world.lidar_scan(s, rng, (*fx.obstacles, *others))
             lo, hi, inc = self._lidar_meta
             lc = self.cfg.world.lidar
             self.lidar_pub.put(

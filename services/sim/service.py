@@ -16,6 +16,7 @@ import math
 import os
 import threading
 import time
+from functools import partial
 from pathlib import Path
 
 import msgspec
@@ -23,27 +24,20 @@ import numpy as np
 
 from common import keys
 from common.clock import NS
-from common.config import load_manifest
+from common.config import ConfigError, load_manifest
 from common.field import load_field
-from common.messages.sim import (
-    RenderReply,
-    RenderRequest,
-    SimClock,
-    SimRun,
-    SimWheelCommand,
-)
+from common.messages.sim import RenderReply, RenderRequest, SimClock, SimRun
 from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
 from services.sim.barrier import Barrier
 from services.sim.battery import SimBattery
 from services.sim.config import SimConfig
-from services.sim.devices import Devices
 from services.sim.faults import FaultSchedule
-from services.sim.imu import ImuModel
 from services.sim.plant_truth import write_plant_truth
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
+from services.sim.robots import SEED_STRIDE, SimRobot, starts
 from services.sim.storage import PathRefused, confine
 from services.sim.truth_file import scan_truth, write_truth
 from services.sim.world import World
@@ -59,31 +53,33 @@ class SimService:
             "world: %d sphere targets, %s", len(self.world.sphere_centres), self.world.placement
         )
         self.scan_root = Path(cfg.scan_dir or ctx.run_dir)
-        x, y, yaw = cfg.start or (float(fld.origin_xy[0]), float(fld.origin_xy[1]), 0.0)
-        self.state = self.world.settle(RobotState(x=x, y=y, yaw=math.radians(yaw)))
-        self.rng = np.random.default_rng(cfg.seed)
         self.sim_ns = 0
         self.faults = FaultSchedule(cfg.faults)
-        self.imu = ImuModel(cfg.imu, cfg.seed, ctx.robot.imu)
         self.snap_path = snapshot.snapshot_path(ctx.run_dir)
         try:  # evaluation only: the true plants, beside the world snapshot
             ctx.log.info("plants' truth: %s", write_plant_truth(self.snap_path.parent, self.world))
         except OSError as exc:  # a run folder we cannot write must not stop the world
             ctx.log.warning("cannot write the plants' truth: %s", exc)
         self.world_id = snapshot.fingerprint(layout, fld, cfg.world, ctx.robot)
-        self.battery = SimBattery(ctx.robot.battery, ctx.log)
+        self._lock = threading.Lock()  # held while stepping or rendering
+        try:
+            placed = starts(cfg, fld)
+        except ValueError as exc:
+            raise ConfigError(f"[services.sim] {exc}") from None
+        self.robots = [
+            SimRobot(ctx, cfg, self.world, self.faults, k, ns, start, self._lock)
+            for k, (ns, start) in enumerate(placed)
+        ]
+        for r in self.robots:
+            r.others = [o for o in self.robots if o is not r]
+            if r.namespace:
+                ctx.log.info("robot %s at (%.2f, %.2f)", r.namespace, r.state.x, r.state.y)
         if cfg.resume:
             self._resume()
-        self._lock = threading.Lock()  # held while stepping or rendering
-        self._cmd: SimWheelCommand | None = None
-        self._cmd_ns = -(10**18)
         bus = ctx.bus
         self.clock_pub = bus.publisher(keys.SIM_CLOCK)
-        self.devices = Devices(ctx, cfg, self.world, self.imu, self.faults, self.battery)
-        bus.subscribe(keys.SIM_WHEELS, self._on_wheels)
-        # the operator who swaps the battery watches the mission
-        bus.subscribe(keys.MISSION_STATE, self.battery.on_mission)
-        bus.serve(keys.SIM_RENDER, self.render)
+        for r in self.robots:
+            bus.serve(keys.SIM_RENDER.within(r.namespace), partial(self.render, r))
         self.barrier: Barrier | None = None
         self._held = threading.Event()
         self.real_time_factor = cfg.real_time_factor  # paced at; SIM_RUN may change it
@@ -95,19 +91,34 @@ class SimService:
             bus.report("lockstep_late", lambda: self.barrier.late if self.barrier else 0)
         self._tick = SimClock(sim_ns=0)
 
+    @property
+    def state(self) -> RobotState:
+        """The first robot's true state (the only one's, without ``robots``)."""
+        return self.robots[0].state
+
     def _resume(self) -> None:
         snap = snapshot.load(self.snap_path, self.world_id)
         if snap is None:
             return
+        saved = snapshot.robots(snap)
+        if len(saved) != len(self.robots):
+            self.ctx.log.warning("%s: another number of robots, starting afresh", self.snap_path)
+            return
         try:
-            self.state = snapshot.restore(snap, self.rng)
+            restored = [
+                snapshot.restore(r, robot.rng) for r, robot in zip(saved, self.robots, strict=True)
+            ]
         except (ValueError, TypeError, KeyError) as exc:
             self.ctx.log.warning("%s: cannot restore (%s), starting afresh", self.snap_path, exc)
-            self.rng = np.random.default_rng(self.cfg.seed)
+            for k, robot in enumerate(self.robots):
+                robot.rng = np.random.default_rng(self.cfg.seed + SEED_STRIDE * k)
             return
         self.sim_ns = snap.sim_ns
-        charge = snap.robot.get(snapshot.BATTERY_KEY)
-        self.battery = SimBattery(self.ctx.robot.battery, self.ctx.log, charge)
+        for robot, state, r in zip(self.robots, restored, saved, strict=True):
+            robot.state, robot.sim_ns = state, snap.sim_ns
+            charge = r.robot.get(snapshot.BATTERY_KEY)
+            robot.battery = SimBattery(self.ctx.robot.battery, self.ctx.log, charge)
+            robot.devices.battery = robot.battery
         self.ctx.log.info(
             "continuing the world of %s from sim time %.1f s (saved %.1f s ago), robot at "
             "(%.2f, %.2f)",
@@ -126,10 +137,8 @@ class SimService:
                 self.world_id,
                 self.world.field.name,
                 self.sim_ns,
-                self.state,
-                self.rng,
+                [(r.state, r.rng, r.battery.charge_wh) for r in self.robots],
                 closed,
-                self.battery.charge_wh,
             )
         snapshot.save(self.snap_path, snap)
 
@@ -140,30 +149,26 @@ class SimService:
             except OSError as exc:  # a full disk must not stop the world
                 self.ctx.log.warning("cannot save the world snapshot: %s", exc)
 
-    def _on_wheels(self, cmd: SimWheelCommand) -> None:
-        with self._lock:
-            self._cmd, self._cmd_ns = cmd, self.sim_ns
-
-    def render(self, req: RenderRequest) -> RenderReply:
+    def render(self, robot: SimRobot, req: RenderRequest) -> RenderReply:
         try:
             path = confine(req.path, self.scan_root, ".e57", "RenderRequest.path")
         except PathRefused as exc:
             raise RequestError(str(exc)) from None
         t0 = time.monotonic()
         with self._lock:  # the world (and its clock) stands still during the scan
-            pose = self.world.scanner_pose(self.state)
+            st, rng = robot.state, robot.rng
+            pose = self.world.scanner_pose(st)
             settings = msgspec.structs.replace(self.cfg.scan, step_deg=req.step_deg)
-            scan = self.world.render_scan(pose, settings, self.rng)
+            scan = self.world.render_scan(pose, settings, rng)
             sd = math.radians(self.cfg.inclinometer_sd_deg)
             # the compensator measures the scanner's tilt: the base's, turned by the
             # mount's yaw (ZYX: pitch from r20, roll from r21 and r22)
             true_pitch = -math.asin(min(1.0, max(-1.0, float(pose[2, 0]))))
             true_roll = math.atan2(float(pose[2, 1]), float(pose[2, 2]))
-            pitch = true_pitch + float(self.rng.normal(0.0, sd))
-            roll = true_roll + float(self.rng.normal(0.0, sd))
+            pitch = true_pitch + float(rng.normal(0.0, sd))
+            roll = true_roll + float(rng.normal(0.0, sd))
             path.parent.mkdir(parents=True, exist_ok=True)
             write_e57(path, scan.points, scan.intensity, name=path.stem)
-            st = self.state
             # evaluation only: lets `phenorover register` score against the truth
             write_truth(path, scan_truth(self.sim_ns, pose, st))
         return RenderReply(
@@ -202,15 +207,9 @@ class SimService:
             thunk()
 
     def _step(self, dt: float) -> None:
-        c = self._cmd
-        fresh = c is not None and self.sim_ns - self._cmd_ns <= self.cfg.motor_timeout_s * NS
-        v, w = (c.v, c.w) if fresh and c is not None else (0.0, 0.0)
-        if self.battery.empty:  # no power, no drive
-            v = w = 0.0
-        self.state = self.world.step_robot(self.state, v, w, dt, self.rng)
         self.sim_ns += int(dt * NS)
-        st = self.state
-        self.battery.step(dt, st.v_wheel, st.w_wheel, self.sim_ns)
+        for r in self.robots:
+            r.step(dt, self.sim_ns)
 
     def run(self, stop: threading.Event) -> None:
         saver = None
@@ -223,7 +222,10 @@ class SimService:
             told = True  # the loop ends only when stop is set: SIGTERM, not a crash
         finally:
             stop.set()
-            self.ctx.log.info("%s", self.battery.summary())
+            for r in self.robots:
+                self.ctx.log.info(
+                    "%s%s", f"{r.namespace}: " if r.namespace else "", r.battery.summary()
+                )
             if saver is not None:
                 saver.join(timeout=2.0)
                 try:
@@ -240,14 +242,17 @@ class SimService:
         while not stop.is_set():
             with self._lock:
                 # what the devices sense, then the tick expecting it
-                self.devices.publish(k, self.state, self.sim_ns, self.rng)
-                b, me = self.barrier, self.ctx.bus.participant
+                for r in self.robots:
+                    r.publish(k, self.sim_ns)
+                b = self.barrier
                 self._tick = SimClock(
                     stamp_ns=self.sim_ns,
                     sim_ns=self.sim_ns,
                     real_time_factor=self.real_time_factor,
                     step=-1 if b is None else k,
-                    expect={} if b is None else b.expect(me, self.ctx.bus.counts()),
+                    expect={}
+                    if b is None
+                    else b.expect(self.ctx.bus.participant, self.ctx.bus.counts()),
                 )
                 self.clock_pub.put(self._tick)
             if self.barrier is not None:

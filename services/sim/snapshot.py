@@ -58,6 +58,15 @@ class Snapshot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     robot: dict[str, float]
     rng: str
     closed: bool = False
+    # the other robots of a shared world, in order after the first
+    fleet: list[RobotSnapshot] = msgspec.field(default_factory=list)
+
+
+class RobotSnapshot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """One robot's part: its true state (with its battery's charge) and noise."""
+
+    robot: dict[str, float]
+    rng: str
 
 
 # the battery's charge (Wh) among the robot's state
@@ -103,16 +112,12 @@ def take(
     world: str,
     field: str,
     sim_ns: int,
-    state: RobotState,
-    rng: np.random.Generator,
+    robots: list[tuple[RobotState, np.random.Generator, float | None]],
     closed: bool = False,
-    battery_wh: float | None = None,
 ) -> Snapshot:
-    """The snapshot of a world at one instant (the caller holds the world still);
-    ``battery_wh``, the battery's charge, is kept with the robot's state."""
-    robot = dataclasses.asdict(state)
-    if battery_wh is not None:
-        robot[BATTERY_KEY] = battery_wh
+    """The snapshot of a world at one instant (the caller holds the world still):
+    each robot's state, noise generator and battery charge (kept with its state)."""
+    parts = [_part(*r) for r in robots]
     return Snapshot(
         closed=closed,
         world=world,
@@ -120,9 +125,22 @@ def take(
         field=field,
         sim_ns=sim_ns,
         wall_ns=time.time_ns(),
-        robot=robot,
-        rng=json.dumps(rng.bit_generator.state),
+        robot=parts[0].robot,
+        rng=parts[0].rng,
+        fleet=parts[1:],
     )
+
+
+def _part(state: RobotState, rng: np.random.Generator, battery_wh: float | None) -> RobotSnapshot:
+    robot = dataclasses.asdict(state)
+    if battery_wh is not None:
+        robot[BATTERY_KEY] = battery_wh
+    return RobotSnapshot(robot=robot, rng=json.dumps(rng.bit_generator.state))
+
+
+def robots(snap: Snapshot) -> list[RobotSnapshot]:
+    """Every robot's part of ``snap``, the first first."""
+    return [RobotSnapshot(robot=snap.robot, rng=snap.rng), *snap.fleet]
 
 
 def save(path: Path, snap: Snapshot) -> None:
@@ -154,8 +172,8 @@ def load(path: Path, world: str, deployment: str | None = None) -> Snapshot | No
     return snap
 
 
-def restore(snap: Snapshot, rng: np.random.Generator) -> RobotState:
-    """The robot state of ``snap``; sets ``rng`` to the snapshot's generator state."""
+def restore(snap: Snapshot | RobotSnapshot, rng: np.random.Generator) -> RobotState:
+    """The (first) robot's state of ``snap``; sets ``rng`` to its generator state."""
     known = {f.name for f in dataclasses.fields(RobotState)}
     state = RobotState(**{k: float(v) for k, v in snap.robot.items() if k in known})
     rng.bit_generator.state = json.loads(snap.rng)

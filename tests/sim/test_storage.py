@@ -95,7 +95,7 @@ def test_snapshot_round_trip_restores_robot_and_noise(tmp_path: Path) -> None:
     rng.normal(size=3)
     state = RobotState(x=1.5, y=2.5, yaw=0.3, v=0.2, w=-0.1, icr=0.01)
     path = snapshot.snapshot_path(tmp_path)
-    snapshot.save(path, snapshot.take(world, "spl", 123_000, state, rng))
+    snapshot.save(path, snapshot.take(world, "spl", 123_000, [(state, rng, None)]))
     expected = rng.normal(size=4)
 
     snap = snapshot.load(path, world)
@@ -114,12 +114,12 @@ def test_snapshots_of_another_world_or_deployment_or_garbage_are_ignored(tmp_pat
     path = snapshot.snapshot_path(tmp_path)
     assert snapshot.load(path, world) is None  # none yet
     rng = np.random.default_rng(0)
-    snapshot.save(path, snapshot.take(world, "spl", 5, RobotState(), rng))
+    snapshot.save(path, snapshot.take(world, "spl", 5, [(RobotState(), rng, None)]))
     assert snapshot.load(path, "another world") is None
     assert snapshot.load(path, world, deployment="1@2") is None  # an earlier launcher's
     assert snapshot.load(path, world) is not None
     # a simulator told to stop leaves nothing to continue
-    snapshot.save(path, snapshot.take(world, "spl", 5, RobotState(), rng, closed=True))
+    snapshot.save(path, snapshot.take(world, "spl", 5, [(RobotState(), rng, None)], closed=True))
     assert snapshot.load(path, world) is None
     path.write_bytes(b"{not json")
     assert snapshot.load(path, world) is None
