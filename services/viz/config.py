@@ -27,8 +27,13 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     of the registered cloud (LAZ in the field frame or a multi-scan E57 with poses).
     ``trait``: which of :data:`common.canopy.TRAITS` colours the plots once the
     mission's ``traits_file`` (in its run folder, written after registration) exists.
+    ``robots``: the namespaces of robots sharing the field, each drawn under
+    ``fleet/<namespace>/`` (:mod:`services.viz.fleet_view`).
     """
 
+    robots: list[Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]] = msgspec.field(
+        default_factory=list
+    )
     serve: bool = False
     bind: str = "0.0.0.0"
     grpc_port: Port = 9876

@@ -35,6 +35,7 @@ from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
 from services.viz import clouds, scene, traits_view
 from services.viz.config import VizConfig
+from services.viz.fleet_view import FleetView
 from services.viz.outputs import Outputs
 
 # a robot slower than this (m/s, rad/s) stands where its last scan was taken
@@ -82,6 +83,8 @@ class VizService:
         for name, topic in LATEST.items():
             ctx.bus.subscribe(topic, functools.partial(self._put, name))
         ctx.bus.subscribe(keys.MISSION_EVENT, self._on_event)
+        # robots sharing the field (none: nothing), each under fleet/<namespace>/
+        self.fleet = FleetView(ctx.bus, cfg.robots, ctx.robot, self.out.log, self._set_static)
         # the servers listen before the service is alive (after build()), so a client
         # that sees it alive can connect; run() closes them
         self.out.start()
@@ -150,6 +153,7 @@ class VizService:
             self._guarded("event", functools.partial(self._log_event, e))
         for st in done:
             self._guarded("scan", functools.partial(self._queue_scan, st))
+        self._guarded("fleet", self.fleet.tick)
         self._guarded("registered", self._check_registered)
         self._guarded("traits", lambda: self.traits.poll(self.ctx.run_dir, self.state))
 
