@@ -88,8 +88,10 @@ class Launcher:
         self.heartbeats = HeartbeatWatch(self.manifest.machine, self.manifest.hung_after_s)
 
     def _print(self, name: str, line: str) -> None:
+        # a robot's services by its namespace too: several robots may share a terminal
+        label = keys.participant(name, self.manifest.namespace)
         with self._out_lock:
-            self.out.write(f"{name:>8} | {line}\n")
+            self.out.write(f"{label:>8} | {line}\n")
             self.out.flush()
 
     def _spawn(self, child: Child) -> None:

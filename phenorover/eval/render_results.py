@@ -42,6 +42,7 @@ BENCHMARKS = {
     "bench_planner": "Planning: visibility, cover and tour",
     "bench_scale": "Breeding-programme scale: a 100 x 100-plot field",
     "bench_fleet": "Several robots, one field: the plan's split",
+    "bench_fleet_sim": "Several robots, one field: the simulated survey",
     "bench_devices": "Devices: GNSS compass and simulated FARO scans",
     "bench_survey": "Whole surveys: `make sim` and `make hil` (every device on its wire)",
 }

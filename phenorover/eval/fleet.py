@@ -1,0 +1,328 @@
+"""Robots sharing a field in simulation, scored against the truth.
+
+:func:`run` starts a simulated deployment of N robots on one machine as N + 1
+machines would run it: the world (simulator and planner, a base station's) and each
+robot (its devices, navigation and mission under its namespace), each with its own
+Zenoh router, the robots' routers linked to the world's; with ``partition`` the link
+of one robot passes a :class:`~phenorover.eval.relay.Relay` that is cut for a while
+(the robot is then cut off from its peers and, in simulation, from the world that
+feeds its devices: it stands until the link is back). It plans the field for N
+robots, sends each robot the plan (each mission takes its share), can kill one
+robot's mission supervisor mid-survey (the launcher starts it again; it resumes from
+its log and its lane reservations from their file), and records every robot's true
+pose. :func:`score` then says, from the truth and the mission logs alone:
+
+- the field time: from the first mission's start to the last one's end, sim time;
+- lane-segment conflicts: instants at which two robots' bodies reach one lane
+  segment (:mod:`common.lanes`, their true positions, each robot's footprint);
+- every location scanned exactly once: the done steps of all the robots' logs
+  against the plan's locations.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import threading
+import time
+import tomllib
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+
+from common import keys
+from common.client import open_client, wait_alive
+from common.config import load_manifest
+from common.field import load_field
+from common.lanes import LaneMap, footprint_radius
+from common.messages.mission import MissionStart, MissionState
+from common.messages.plan import PlanOptions, PlanResult
+from common.messages.sim import TruthPose
+from common.missionlog import read_log
+from common.process import free_loopback_port
+from common.robot import load_robot
+from common.transport import Bus
+from phenorover.eval.relay import Relay
+from phenorover.launcher import Launcher
+
+NS = 1_000_000_000
+DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "fleet"
+
+
+@dataclasses.dataclass(frozen=True)
+class Faults:
+    """``kill``: (robot, sim s) its mission supervisor is killed at; ``partition``:
+    (robot, sim s, wall s) its link is cut at, and for how long."""
+
+    kill: tuple[str, float] | None = None
+    partition: tuple[str, float, float] | None = None
+
+
+@dataclasses.dataclass
+class Outcome:
+    """What a run left: each robot's run folder and mission, its true poses (sim ns,
+    x, y) and the final states."""
+
+    plan: PlanResult
+    run_dirs: dict[str, Path]
+    truth: dict[str, list[tuple[int, float, float]]]
+    final: dict[str, MissionState | None]
+    notes: list[str] = dataclasses.field(default_factory=list)
+
+
+def names(robots: int) -> list[str]:
+    return [f"rover{k}" for k in range(1, robots + 1)]
+
+
+def write_deployment(
+    out: Path, field: Path, robots: int, rtf: float, seed: int, partition: str | None
+) -> tuple[Path, dict[str, Path], Relay | None]:
+    """The world's and each robot's manifests under ``out`` (from ``deploy/fleet``'s,
+    on free loopback ports), and the relay of the partitioned robot's link."""
+    world = tomllib.loads((DEPLOY / "world.toml").read_text())
+    port = free_loopback_port()
+    world |= {"field": str(field), "run_dir": str(out / "world")}
+    world["zenoh"] = {"listen": [f"tcp/127.0.0.1:{port}"]}
+    # the experiment measures the robots: no dashboard (its ports are a user's)
+    world["services"].pop("viz", None)
+    sim = world["services"]["sim"]
+    sim |= {"real_time_factor": rtf, "seed": seed, "scan_dir": str(out)}
+    sim["robots"] = [{"namespace": n} for n in names(robots)]
+    docs: dict[str, dict[str, Any]] = {"world": world}
+    relay = None
+    for k, name in enumerate(names(robots), start=1):
+        rover = tomllib.loads((DEPLOY / "rover1.toml").read_text())
+        target = port
+        if name == partition:
+            relay = Relay(port)
+            target = relay.port
+        rover |= {
+            "machine": name,
+            "namespace": name,
+            "field": str(field),
+            "run_dir": str(out / name),
+            "zenoh": {
+                "listen": [f"tcp/127.0.0.1:{free_loopback_port()}"],
+                "connect": [f"tcp/127.0.0.1:{target}"],
+            },
+        }
+        rover["services"]["scanner"]["storage_dir"] = str(out / name / "scanner-card")
+        mission = rover["services"]["mission"]
+        mission["share"] = k if robots > 1 else 0
+        mission["lanes"] = {"peers": [n for n in names(robots) if n != name]}
+        docs[name] = rover
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {}
+    for name, doc in docs.items():
+        paths[name] = out / f"{name}.toml"
+        paths[name].write_bytes(msgspec.toml.encode(doc))
+    return paths.pop("world"), paths, relay
+
+
+def run(
+    field: Path,
+    out: Path,
+    robots: int,
+    options: PlanOptions,
+    rtf: float = 4.0,
+    seed: int = 1,
+    faults: Faults = Faults(),
+    timeout_s: float = 3600.0,
+    say: Any = print,
+) -> Outcome:
+    """One survey of ``field`` by ``robots`` robots (see the module docstring); the
+    plan made with ``options`` for that many robots. Raises RuntimeError, one line,
+    when the deployment does not come up or a mission cannot start."""
+    from services.planner.core import plan as make_plan
+
+    layout, fld = load_field(field)
+    plan = make_plan(layout, field=fld, options=msgspec.structs.replace(options, robots=robots))
+    cut = faults.partition[0] if faults.partition else None
+    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut)
+    if robots == 1:  # alone, the robot starts where a one-robot plan does: the Origin
+        _start_at_origin(world, fld.origin_xy)
+    launchers = {"world": Launcher(world), **{n: Launcher(m) for n, m in rovers.items()}}
+    outcome = Outcome(plan, {}, {n: [] for n in rovers}, {})
+    try:
+        for la in launchers.values():
+            la.start()
+        with open_client(world, []) as session:
+            wanted = {s for la in launchers.values() for s in la.children}
+            alive = wait_alive(session, wanted, timeout=180)
+            if not alive:
+                raise RuntimeError(f"not alive after 180 s: {sorted(alive.missing)}")
+            bus = Bus(session, "fleet-eval")
+            try:
+                _survey(bus, plan, rovers, launchers, relay, faults, timeout_s, outcome, say)
+            finally:
+                bus.close()
+    finally:
+        for la in launchers.values():
+            la.stop()
+        if relay is not None:
+            relay.close()
+    for name, m in rovers.items():
+        state = outcome.final.get(name)
+        if state is not None:
+            outcome.run_dirs[name] = Path(load_manifest(m).run_dir) / state.mission
+    return outcome
+
+
+def _start_at_origin(world: Path, origin: np.ndarray) -> None:
+    doc = tomllib.loads(world.read_text())
+    robots = doc["services"]["sim"]["robots"]
+    robots[0]["start"] = [float(origin[0]), float(origin[1]), 0.0]
+    world.write_bytes(msgspec.toml.encode(doc))
+
+
+def _survey(
+    bus: Bus,
+    plan: PlanResult,
+    rovers: dict[str, Path],
+    launchers: dict[str, Launcher],
+    relay: Relay | None,
+    faults: Faults,
+    timeout_s: float,
+    outcome: Outcome,
+    say: Any,
+) -> None:
+    lock = threading.Lock()
+
+    def recorder(name: str) -> Any:
+        def on(p: TruthPose) -> None:
+            with lock:
+                outcome.truth[name].append((p.stamp_ns, p.x, p.y))
+
+        return on
+
+    states = {}
+    for name in rovers:
+        bus.subscribe(keys.SIM_TRUTH.within(name), recorder(name))
+        states[name] = bus.latest(keys.MISSION_STATE.within(name))
+    clock = bus.latest(keys.SIM_CLOCK)
+    for name in rovers:
+        st = _start(bus, name, plan)
+        say(f"{name}: mission {st.mission} started, {st.scans_total} locations")
+    kill, part = faults.kill, faults.partition
+    healed_at: float | None = None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        time.sleep(0.5)
+        c = clock.get()
+        now = c.sim_ns / NS if c is not None else 0.0
+        if kill is not None and now >= kill[1]:
+            pid = launchers[kill[0]].pids()["mission"]
+            os.kill(pid, signal.SIGKILL)
+            outcome.notes.append(f"{kill[0]}'s mission supervisor killed at {now:.0f} s sim")
+            say(outcome.notes[-1])
+            kill = None
+        if part is not None and relay is not None and now >= part[1]:
+            relay.cut()
+            healed_at = time.monotonic() + part[2]
+            outcome.notes.append(f"{part[0]} cut off at {now:.0f} s sim for {part[2]:.0f} s wall")
+            say(outcome.notes[-1])
+            part = None
+        if healed_at is not None and time.monotonic() >= healed_at and relay is not None:
+            relay.restore()
+            outcome.notes.append(f"{faults.partition[0]}'s link back at {now:.0f} s sim")  # type: ignore[index]
+            say(outcome.notes[-1])
+            healed_at = None
+        finals = {n: s.get() for n, s in states.items()}
+        if all(
+            s is not None and not s.in_progress and s.phase.value != "idle" for s in finals.values()
+        ):
+            break
+    outcome.final = {n: s.get() for n, s in states.items()}
+
+
+def _start(bus: Bus, name: str, plan: PlanResult) -> MissionState:
+    """Start robot ``name``'s mission, asking again while its queryable is not yet
+    reachable."""
+    from common.rpc import RpcError
+
+    cmd = MissionStart(mission=f"fleet-{name}", plan=plan)
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            return bus.call(keys.MISSION_CMD.within(name), cmd, timeout=60)
+        except RpcError as exc:
+            if "no reply" not in str(exc) or time.monotonic() > deadline:
+                raise RuntimeError(f"{name}: mission did not start: {exc}") from None
+
+
+@dataclasses.dataclass(frozen=True)
+class Score:
+    field_s: float  # first start to last end, sim time
+    conflicts: int  # truth samples with two robots in one lane segment
+    closest_m: float  # the closest two robots came, true positions
+    missing: list[int]  # locations no robot scanned
+    twice: list[int]  # locations scanned more than once
+    per_robot: dict[str, int]  # locations each robot scanned
+    examples: list[str]
+
+
+def score(outcome: Outcome, field: Path, robot: str = "") -> Score:
+    """The outcome against the truth and the mission logs (see the module docstring);
+    ``robot``: the robot description (its footprint)."""
+    _, fld = load_field(field)
+    fp = load_robot(robot).footprint
+    reach = footprint_radius(fp.length, fp.width)
+    lanes = LaneMap(fld)
+    created, done = [], []
+    scanned: Counter[int] = Counter()
+    per_robot = {}
+    for name, run_dir in outcome.run_dirs.items():
+        log = read_log(run_dir / "mission.db")
+        assert log.mission is not None
+        created.append(int(log.mission["created_ns"]))
+        ends = [
+            t
+            for t, _lvl, text in log.events
+            if text.startswith("mission ") and text.endswith(" done")
+        ]
+        done.append(max(ends) if ends else max(t for t, _l, _x in log.events))
+        ids = [s.cand_id for s in log.steps if s.status == "done"]
+        scanned.update(ids)
+        per_robot[name] = len(ids)
+    field_s = (max(done) - min(created)) / NS if done else float("nan")
+    selected = outcome.plan.selected
+    conflicts, closest, examples = _conflicts(outcome.truth, lanes, reach)
+    return Score(
+        field_s=field_s,
+        conflicts=conflicts,
+        closest_m=closest,
+        missing=sorted(set(selected) - set(scanned)),
+        twice=sorted(c for c, n in scanned.items() if n > 1),
+        per_robot=per_robot,
+        examples=examples,
+    )
+
+
+def _conflicts(
+    truth: dict[str, list[tuple[int, float, float]]], lanes: LaneMap, reach: float
+) -> tuple[int, float, list[str]]:
+    """Instants (truth samples of every robot at one sim time) at which two robots'
+    bodies reach one lane segment; the closest the robots came; a few examples."""
+    names_ = sorted(truth)
+    if len(names_) < 2:
+        return 0, float("inf"), []
+    per = {n: {t: (x, y) for t, x, y in truth[n]} for n in names_}
+    common = sorted(set.intersection(*(set(p) for p in per.values())))
+    if not common:
+        return 0, float("inf"), []
+    xy = {n: np.array([per[n][t] for t in common]) for n in names_}
+    inside = {n: lanes.distances(xy[n]) <= reach for n in names_}
+    count, closest, examples = 0, float("inf"), []
+    for i, a in enumerate(names_):
+        for b in names_[i + 1 :]:
+            both = (inside[a] & inside[b]).any(axis=1)
+            count += int(both.sum())
+            closest = min(closest, float(np.hypot(*(xy[a] - xy[b]).T).min()))
+            for k in np.flatnonzero(both)[:3]:
+                seg = lanes.ids[int(np.flatnonzero(inside[a][k] & inside[b][k])[0])]
+                examples.append(f"{a} and {b} in {seg} at {common[k] / NS:.1f} s")
+    return count, closest, examples
