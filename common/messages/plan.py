@@ -5,6 +5,7 @@ times in seconds, coordinates in the ``field`` frame. Candidate ids follow
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated, Literal
 
 import msgspec
@@ -226,3 +227,15 @@ class PlanRequest(Message, frozen=True, kw_only=True):
     scanner: ScannerModel = msgspec.field(default_factory=ScannerModel)
     options: PlanOptions = msgspec.field(default_factory=PlanOptions)
     battery: Battery = msgspec.field(default_factory=Battery)
+
+
+def read_plan(path: Path, what: str) -> PlanResult:
+    """The plan in the JSON file ``path`` (``phenorover plan``'s ``plan.json``);
+    ValueError, one line beginning with ``what`` (how the caller names the file):
+    unreadable, or not a plan."""
+    try:
+        return msgspec.json.decode(path.read_bytes(), type=PlanResult)
+    except OSError as exc:
+        raise ValueError(f"{what}: {exc.strerror}") from None
+    except msgspec.DecodeError as exc:
+        raise ValueError(f"{what}: not a plan ({exc})") from None

@@ -51,6 +51,7 @@ from phenorover.launcher import Launcher
 
 NS = 1_000_000_000
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "fleet"
+ALIVE_S = 900.0  # how long a deployment may take to come up (the world's build)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,10 +152,13 @@ def run(
         for la in launchers.values():
             la.start()
         with open_client(world, []) as session:
-            wanted = {s for la in launchers.values() for s in la.children}
-            alive = wait_alive(session, wanted, timeout=180)
-            if not alive:
-                raise RuntimeError(f"not alive after 180 s: {sorted(alive.missing)}")
+            for la in launchers.values():  # a world of many plots takes minutes to grow
+                machine = la.manifest.machine
+                alive = wait_alive(session, set(la.children), ALIVE_S, machine=machine)
+                if not alive:
+                    raise RuntimeError(
+                        f"{machine}: not alive after {ALIVE_S:g} s: {sorted(alive.missing)}"
+                    )
             bus = Bus(session, "fleet-eval")
             try:
                 _survey(bus, plan, rovers, launchers, relay, faults, timeout_s, outcome, say)

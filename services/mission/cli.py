@@ -10,8 +10,6 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-import msgspec
-
 from common import keys
 from common.config import ConfigError, load_manifest
 from common.keys import NAMESPACE_RE
@@ -27,7 +25,7 @@ from common.messages.mission import (
     MissionState,
     MissionStatusQuery,
 )
-from common.messages.plan import PlanResult
+from common.messages.plan import read_plan
 from common.transport import Bus, RpcError
 
 
@@ -71,7 +69,7 @@ def cmd_mission(args: argparse.Namespace) -> int:
 
     prog = f"phenorover mission {args.action}"
     try:
-        plan = None if args.plan is None else read_plan(args.plan)
+        plan = None if args.plan is None else read_plan(args.plan, f"--plan {args.plan}")
         namespace = robot_namespace(args.robot, args.manifest)
     except (ValueError, ConfigError) as exc:
         print(f"{prog}: {exc}", file=sys.stderr)
@@ -98,16 +96,6 @@ def cmd_mission(args: argparse.Namespace) -> int:
         finally:
             bus.close()
     return 0
-
-
-def read_plan(path: Path) -> PlanResult:
-    """A plan.json (``phenorover plan``'s), ValueError naming the file and the fault."""
-    try:
-        return msgspec.json.decode(path.read_bytes(), type=PlanResult)
-    except OSError as exc:
-        raise ValueError(f"--plan {path}: {exc.strerror}") from None
-    except msgspec.DecodeError as exc:
-        raise ValueError(f"--plan {path}: not a plan ({exc})") from None
 
 
 def robot_namespace(robot: str | None, manifest: Path | None) -> str:

@@ -4,8 +4,9 @@ Before each route the mission reserves every lane segment (:mod:`common.lanes`) 
 robot will be in along it (its body's reach plus ``margin_m`` for how far it may
 stray), as :mod:`.reservation` rules, asking each peer's mission on
 ``rpc/fleet/lanes/<peer>``; at the route's end it keeps only the segments where it
-stands. It answers the peers' questions on its own key from the moment the service
-starts, whatever it is doing.
+stands, and along the way it releases what lies behind at the start of each leg. It
+answers the peers' questions on its own key from the moment the service starts,
+whatever it is doing.
 
 What it holds and wants is written to ``<run_dir>/lanes-<namespace>.json`` before
 anyone can learn it (atomically, and before the robot moves into what it was granted),
@@ -59,6 +60,7 @@ class Lanes:
         self.path = Path(ctx.run_dir) / f"lanes-{self.me}.json"
         self._lock = threading.Lock()
         self.claims = self._load()
+        self._at_leg: tuple[int, int] = (0, -1)  # the route (its legs' id) and leg last seen
         ctx.bus.serve(keys.FLEET_LANES.at(robot=self.me), self._answer)
 
     def _load(self) -> Claims:
@@ -130,6 +132,21 @@ class Lanes:
                 wait(self.cfg.retry_s)
         if said:
             say("lanes: reserved, driving on")
+
+    def passed(self, leg: int, legs: list[Leg], x: float, y: float) -> None:
+        """On a route of ``legs``, now on leg ``leg`` at (x, y): release what lies
+        behind, so that a peer waiting for it need not wait for the route's end. Each
+        leg's start is looked at once."""
+        if (id(legs), leg) == self._at_leg:
+            return
+        self._at_leg = (id(legs), leg)
+        keep = self.map.at(np.array([[x, y]]), self.reach)[0] | self.map.along(
+            legs[leg:], self.reach
+        )
+        with self._lock:
+            if self.claims.held - keep:
+                self.claims.held &= keep
+                self._save()
 
     def release_to(self, x: float, y: float) -> None:
         """Keep only the segments a robot at (x, y) is in."""

@@ -6,11 +6,13 @@ questions with both. To take segments a robot first makes them wanted, so that
 anyone asking sees them, then asks every other robot (:func:`decide`):
 
 - a robot that does not answer (restarting, or cut off by a partition) may hold
-  anything: wait, and ask again;
-- a segment another robot holds: wait until it is released;
+  anything: back off (forget what was wanted, wait, ask again);
+- a segment another robot holds: back off until it is released. A robot that kept
+  wanting while it waited would keep the holder from taking the segments it needs
+  to drive away, and each would wait for the other for good;
 - a segment another robot wants as well: neither takes it this time; the robot
-  whose name sorts later backs off (forgets what it wanted, waits a little longer,
-  asks again), the other keeps wanting it and asks again, and finds it free;
+  whose name sorts later backs off, the other keeps wanting it, asks again sooner,
+  and finds it free;
 - none of these: the segments are held.
 
 No two robots ever hold one segment. Suppose A and B both came to hold s. A wanted s
@@ -55,12 +57,12 @@ def decide(me: str, wanted: set[str], answers: Mapping[str, LaneClaims | None]) 
     it did not answer)."""
     silent = sorted(r for r, a in answers.items() if a is None)
     if silent:
-        return Verdict(False, why=f"no answer from {', '.join(silent)}")
+        return Verdict(False, back_off=True, why=f"no answer from {', '.join(silent)}")
     for robot, a in sorted(answers.items()):
         assert a is not None
         held = wanted & set(a.held)
         if held:
-            return Verdict(False, why=f"{robot} holds {', '.join(sorted(held))}")
+            return Verdict(False, back_off=True, why=f"{robot} holds {', '.join(sorted(held))}")
     for robot, a in sorted(answers.items()):
         assert a is not None
         both = wanted & set(a.wanted)

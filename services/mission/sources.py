@@ -18,7 +18,7 @@ from common import keys
 from common.battery import Pace
 from common.field import FieldError, load_field
 from common.messages.mission import MissionStart
-from common.messages.plan import PlanOptions, PlanRequest, PlanResult
+from common.messages.plan import PlanOptions, PlanRequest, PlanResult, read_plan
 from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
@@ -79,11 +79,9 @@ def _plan(ctx: Context, cmd: MissionStart, timeout: float, pace: Pace) -> PlanRe
                 f"MissionStart.plan_file: {cmd.plan_file} is outside the run folder {ctx.run_dir}"
             )
         try:
-            return msgspec.json.decode(path.read_bytes(), type=PlanResult)
-        except OSError as exc:
-            raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc.strerror}") from None
-        except msgspec.DecodeError as exc:
-            raise RequestError(f"MissionStart.plan_file: {cmd.plan_file}: {exc}") from None
+            return read_plan(path, f"MissionStart.plan_file: {cmd.plan_file}")
+        except ValueError as exc:
+            raise RequestError(str(exc)) from None
     try:
         return ctx.bus.call(
             keys.PLANNER_PLAN,

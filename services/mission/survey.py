@@ -43,6 +43,7 @@ from services.mission.lanes import Lanes
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
 from services.mission.scanning import Scans
+from services.mission.standing import settle
 
 Q = TypeVar("Q")
 R = TypeVar("R")
@@ -205,6 +206,7 @@ class Survey:
             # progress of this route since it was (last) sent; services on a sim clock
             # follow it a tick or two apart
             if p is not None and p.route_id == rid and p.stamp_ns >= sent - SKEW_NS:
+                self._passed(p.leg, seg)
                 if p.state == NavState.ARRIVED:
                     # how it got there (how far off by the estimate, the fine phase's
                     # moves) stays in the mission log
@@ -234,6 +236,12 @@ class Survey:
                     self.event("warning", f"{rid}: {rep.reason}; sending it again")
                     sent = renewed = self._send(seg, rid)
 
+    def _passed(self, leg: int, seg: Segment) -> None:
+        """What the robot's lanes behind it are (robots sharing the field)."""
+        pose = self.pose.get()
+        if self.lanes is not None and pose is not None and 0 <= leg < len(seg.legs):
+            self.lanes.passed(leg, seg.legs, pose.x, pose.y)
+
     def cancel(self, rid: str = "") -> None:
         """Stop route ``rid`` now, or whatever route navigation follows when ``rid``
         is empty (an abort does not know which of its resends is running)."""
@@ -242,40 +250,8 @@ class Survey:
 
     # --- at a location ---
     def settle(self) -> PoseEstimate | None:
-        """Wait until the robot has been localized throughout the last ``settle_s``
-        and its mean speed and turn rate over them are below the still thresholds
-        (the mean, not every sample: the estimate's turn rate carries the encoders'
-        noise). Returns the newest pose, or None after ``settle_timeout_s``."""
-        window: list[PoseEstimate] = []
-        t0 = self.now()
-        warned = silent = False
-        while True:
-            t0 += self.wait(0.1)
-            now = self.now()
-            if (now - t0) / NS > self.cfg.settle_timeout_s:
-                return None
-            p = self.pose.get()
-            if p is None or (window and p.stamp_ns <= window[-1].stamp_ns):
-                # nothing new: a navigation that hangs is not a robot standing still
-                age = self.pose_age_s()
-                if age > self.cfg.nav_lost_s and not silent:
-                    self.event("warning", f"no pose from navigation for {age:.0f} s: waiting")
-                silent = age > self.cfg.nav_lost_s
-                continue
-            if not p.localized:
-                if not warned:
-                    self.event("warning", "localization lost before a scan: waiting")
-                    warned = True
-                window.clear()
-                continue
-            window.append(p)
-            window = [q for q in window if (p.stamp_ns - q.stamp_ns) / NS <= self.cfg.settle_s]
-            if (p.stamp_ns - window[0].stamp_ns) / NS < 0.9 * self.cfg.settle_s:
-                continue
-            v = sum(q.v for q in window) / len(window)
-            w = sum(q.w for q in window) / len(window)
-            if abs(v) < self.cfg.still_speed and abs(w) < self.cfg.still_turn:
-                return p
+        """:func:`services.mission.standing.settle` on this survey."""
+        return settle(self)
 
     def off_by(self, step: Step, x: float, y: float) -> float:
         return math.hypot(x - step.x, y - step.y)

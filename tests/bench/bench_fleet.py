@@ -4,8 +4,8 @@ The plan of a field split between two robots (``PlanOptions.robots``,
 :mod:`services.planner.fleet`) on a 600-plot field (20 x 30 plots) and the 100 x 100-plot
 field, both at ENGR's plot and lane sizes: the slowest robot's time against one
 robot's, both the planner's estimate at the same pace and battery, and the split's
-own time. These are plan estimates: the missions do not yet take their shares, so no
-two-robot survey is simulated.
+own time. These are plan estimates; the simulated survey of two robots is
+``bench_fleet_sim``'s.
 
 Figures are reported, never asserted; an experiment that fails makes it exit 1.
 """
@@ -30,7 +30,7 @@ from services.planner.core import plan
 FIELDS = {"600 plots": (20, 30), "100 x 100 plots": (100, 100)}
 PACE = Pace()  # the mission's default: 0.3 m/s along routes, 300 s a location
 # no target: the issue's (two robots in at most 0.6 x one robot's time) is for the
-# simulated two-robot survey, which is not built; a plan's estimate does not meet it
+# simulated two-robot survey (bench_fleet_sim); a plan's estimate does not meet it
 
 
 def experiment(rows: int, plots: int) -> dict[str, Any]:

@@ -33,9 +33,8 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
 
-import msgspec
-
 from common.battery import Pace
+from common.config import dump_toml
 from common.messages.plan import PlanOptions
 from phenorover.eval import fleet
 from phenorover.eval.error_models import from_manifest
@@ -90,7 +89,7 @@ def main() -> int:
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench_fleet_sim-"))
     root.mkdir(parents=True, exist_ok=True)
     field = root / "field500.toml"
-    field.write_bytes(msgspec.toml.encode(msgspec.to_builtins(engr_sized(ROWS, PLOTS, "f500"))))
+    field.write_text(dump_toml(engr_sized(ROWS, PLOTS, "f500")))
     models = from_manifest(fleet.DEPLOY / "world.toml")
     models["pace"] = f"the world at {RTF:g}x real time, seed {SEED}; the follower's own speeds"
     bench = Bench("bench_fleet_sim", error_models=models)

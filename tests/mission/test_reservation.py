@@ -15,11 +15,12 @@ ROBOTS = ("r1", "r2", "r3")
 SEGMENTS = ("a", "b", "c")
 
 
-def test_held_by_a_peer_waits_and_wanted_by_a_first_named_peer_backs_off() -> None:
+def test_held_by_a_peer_or_wanted_by_a_first_named_peer_backs_off() -> None:
     free = LaneClaims(robot="r2")
     assert decide("r1", {"a"}, {"r2": free}).granted
+    # held by a peer: forget the wish while waiting, or the holder could not leave
     v = decide("r1", {"a", "b"}, {"r2": LaneClaims(robot="r2", held=["b"])})
-    assert not v.granted and not v.back_off and v.why == "r2 holds b"
+    assert not v.granted and v.back_off and v.why == "r2 holds b"
     # both want a: neither takes it; the robot named later backs off, the other waits
     v = decide("r1", {"a"}, {"r2": LaneClaims(robot="r2", wanted=["a"])})
     assert not v.granted and not v.back_off and v.why == "r2 wants a"
@@ -27,7 +28,7 @@ def test_held_by_a_peer_waits_and_wanted_by_a_first_named_peer_backs_off() -> No
     assert not v.granted and v.back_off
     # a peer that does not answer (restarting, or beyond a partition) may hold anything
     v = decide("r1", {"a"}, {"r2": None, "r3": free})
-    assert not v.granted and v.why == "no answer from r2"
+    assert not v.granted and v.back_off and v.why == "no answer from r2"
 
 
 @dataclasses.dataclass
@@ -110,3 +111,18 @@ def test_robots_taking_turns_each_get_the_segment_they_all_want() -> None:
         robots[name].step(robots, {name} if name in through else {"a"})
         through |= {n for n, r in robots.items() if "a" in r.claims.held}
     assert through == set(ROBOTS)
+
+
+def test_a_robot_waiting_for_a_held_segment_lets_the_holder_drive_away() -> None:
+    """r1 stands in a (holds it) and must drive on through b; r2's route needs a and b:
+    r2 backs off while a is held, so r1 gets b and can leave (a first version, whose
+    waiting robots kept wanting, deadlocked here in the two-robot simulation: r2
+    waited for r1's a, r1 for r2 to stop wanting b)."""
+    robots = {n: Robot(n) for n in ("r1", "r2")}
+    robots["r1"].claims.held = {"a"}
+    for k in range(100):
+        name = ("r1", "r2")[k % 2]
+        robots[name].step(robots, {"a", "b"})
+        if "b" in robots["r1"].claims.held:
+            break
+    assert "b" in robots["r1"].claims.held, [(r.name, r.claims) for r in robots.values()]
