@@ -123,3 +123,18 @@ def test_a_shared_field_needs_a_namespace(client_bus: Bus, tmp_path: Path) -> No
 
     with pytest.raises(ConfigError, match="needs a namespace"):
         lanes(client_bus, tmp_path, ["r2"])
+
+
+def test_what_lies_behind_is_released_at_each_legs_start(
+    two: tuple[Bus, Bus], tmp_path: Path
+) -> None:
+    l1 = lanes(two[0], tmp_path, ["r2"])
+    lanes(two[1], tmp_path, ["r1"])
+    legs = [engr_lane(3, 0, 3), engr_lane(3, 3, 5)]
+    t = reserve_in_thread(l1, legs, [])
+    t.join(30)
+    assert {"c3.0", "c3.4"} <= l1.held()
+    l1.passed(1, legs, legs[1].x0, legs[1].y0)  # at the second leg's start
+    held = l1.held()
+    assert "c3.0" not in held and "c3.1" not in held  # behind, out of reach
+    assert {"c3.2", "c3.3", "c3.4"} <= held  # where it stands, and ahead
