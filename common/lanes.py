@@ -3,9 +3,11 @@
 A *lane segment* is a stretch of one lane between two neighbouring lane
 intersections (:mod:`common.field`): of a cross lane between two row-gap lanes, or of
 a row-gap lane between two cross lanes, as the lane graph of Open-RMF's traffic
-schedule has its lanes between waypoints. Every lane is cut, whichever lanes a
-survey drives (``aha`` navigation drives only the cross lanes and the field's edge
-lanes): a robot standing at an intersection reaches into the row-gap lanes too.
+schedule has its lanes between waypoints. Only the lanes a survey drives are cut
+(:func:`driven_rows`): with ``aha`` navigation, the default, every cross lane and the
+field's two edge lanes; the gaps between plot rows (0.8 m on ENGR) are no one's way,
+and two robots at the two ends of one, in neighbouring alleys, are not in each
+other's.
 
 A robot is *in* a segment when its body reaches the segment's centre line: its
 centre within ``radius`` of it (half the footprint's diagonal). At an intersection a
@@ -29,6 +31,7 @@ import numpy as np
 from common.arrays import F64
 from common.field import Field
 from common.messages.nav import Leg
+from common.messages.plan import PlanResult
 
 # how far outside the edge lane's centre line a robot of a fleet parks (m): beyond the
 # reach of a Husky's body (0.6 m) and the reservations' margin
@@ -45,7 +48,8 @@ class LaneMap:
     cross lane k between row-gap lanes j and j+1; ``r<j>.<k>`` row-gap lane j between
     cross lanes k and k+1) and their end points ``ends`` (S, 4: x0, y0, x1, y1)."""
 
-    def __init__(self, field: Field) -> None:
+    def __init__(self, field: Field, rows: list[int] | None = None) -> None:
+        """``rows``: the row-gap lanes driven (None: every one)."""
         xs, ys = field.cross_lanes_x, field.row_lanes_y
         ids: list[str] = []
         ends: list[tuple[float, float, float, float]] = []
@@ -53,7 +57,7 @@ class LaneMap:
             for j in range(len(ys) - 1):
                 ids.append(f"c{k}.{j}")
                 ends.append((float(x), float(ys[j]), float(x), float(ys[j + 1])))
-        for j in range(len(ys)):
+        for j in range(len(ys)) if rows is None else sorted(set(rows)):
             for k in range(len(xs) - 1):
                 ids.append(f"r{j}.{k}")
                 ends.append((float(xs[k]), float(ys[j]), float(xs[k + 1]), float(ys[j])))
@@ -88,6 +92,17 @@ class LaneMap:
         return {self.ids[s] for s in np.flatnonzero(near)}
 
 
+def driven_rows(nav: str, n_rows: int, open_rows: list[int] | None = None) -> list[int]:
+    """The row-gap lanes (of ``n_rows``) a survey under navigation mode ``nav`` drives
+    (:mod:`services.planner.route`): every one with ``br``, the two edge lanes with
+    ``aha``, ``open_rows`` (default the edge lanes) with ``lanes``."""
+    if nav == "br":
+        return list(range(n_rows))
+    if nav == "lanes" and open_rows is not None:
+        return sorted(set(open_rows))
+    return sorted({0, n_rows - 1})
+
+
 def footprint_radius(length: float, width: float) -> float:
     """Half the diagonal of a robot's footprint: how far its body reaches from its centre."""
     return 0.5 * math.hypot(length, width)
@@ -111,3 +126,9 @@ def homes(xs: F64, ys: F64, origin: F64, robots: int) -> tuple[F64, F64]:
     access = np.array([[xs[k], ys[j0]] for k in ks], dtype=np.float64)
     outward = -1.0 if j0 == 0 else 1.0
     return access, access + np.array([0.0, outward * PARK_M])
+
+
+def plan_lanes(field: Field, plan: PlanResult) -> LaneMap:
+    """The lane segments of the lanes ``plan`` drives on ``field``."""
+    opt = plan.options
+    return LaneMap(field, driven_rows(opt.nav, len(field.row_lanes_y), opt.open_rows))

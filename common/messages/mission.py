@@ -108,8 +108,10 @@ class LaneQuery(msgspec.Struct, frozen=True, kw_only=True):
 
 class LaneClaims(Message, frozen=True, kw_only=True):
     """A robot's lane reservations (:mod:`services.mission.lanes`): the segments
-    (:mod:`common.lanes`) it ``held`` and those it ``wanted`` when it answered."""
+    (:mod:`common.lanes`) it ``held`` and those it ``wanted`` when it answered, and
+    those it is ``waiting`` for (held by another robot)."""
 
     robot: str
     held: list[str] = msgspec.field(default_factory=list)
     wanted: list[str] = msgspec.field(default_factory=list)
+    waiting: list[str] = msgspec.field(default_factory=list)

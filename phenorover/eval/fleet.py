@@ -13,8 +13,9 @@ its log and its lane reservations from their file), and records every robot's tr
 pose. :func:`score` then says, from the truth and the mission logs alone:
 
 - the field time: from the first mission's start to the last one's end, sim time;
-- lane-segment conflicts: instants at which two robots' bodies reach one lane
-  segment (:mod:`common.lanes`, their true positions, each robot's footprint);
+- lane-segment conflicts: instants at which two robots' bodies reach one segment of
+  the lanes the survey drives (:mod:`common.lanes`, their true positions, each
+  robot's footprint);
 - every location scanned exactly once: the done steps of all the robots' logs
   against the plan's locations.
 """
@@ -38,7 +39,7 @@ from common import keys
 from common.client import open_client, wait_alive
 from common.config import load_manifest
 from common.field import load_field
-from common.lanes import LaneMap, footprint_radius
+from common.lanes import LaneMap, footprint_radius, plan_lanes
 from common.messages.mission import MissionStart, MissionState
 from common.messages.plan import PlanOptions, PlanResult
 from common.messages.sim import TruthPose
@@ -275,7 +276,7 @@ def score(outcome: Outcome, field: Path, robot: str = "") -> Score:
     _, fld = load_field(field)
     fp = load_robot(robot).footprint
     reach = footprint_radius(fp.length, fp.width)
-    lanes = LaneMap(fld)
+    lanes = plan_lanes(fld, outcome.plan)  # the lanes the survey drives
     created, done = [], []
     scanned: Counter[int] = Counter()
     per_robot = {}

@@ -30,15 +30,20 @@ from common import keys
 from common.config import ConfigError
 from common.field import load_field
 from common.files import atomic_write
-from common.lanes import LaneMap, footprint_radius
+from common.lanes import LaneMap, driven_rows, footprint_radius, plan_lanes
 from common.messages.mission import LaneClaims, LaneQuery
 from common.messages.nav import Leg
+from common.messages.plan import PlanResult
 from common.service import Context
 from common.transport import RpcError
 from services.mission.config import LanesConfig
-from services.mission.reservation import Claims, decide
+from services.mission.reservation import Claims, deadlocked, decide
 
 log = logging.getLogger(__name__)
+
+
+class GiveWay(Exception):
+    """This robot and a peer named first wait for each other: it gives way."""
 
 
 class Lanes:
@@ -53,8 +58,10 @@ class Lanes:
                 "[services.mission.lanes] peers: a robot sharing a field needs a namespace "
                 "(the manifest's namespace) to be told apart by"
             )
-        _, fld = load_field(ctx.field)
-        self.map = LaneMap(fld)
+        _, self.field = load_field(ctx.field)
+        # the lanes an ``aha`` survey drives until a mission's plan says (use())
+        n = len(self.field.row_lanes_y)
+        self.map = LaneMap(self.field, driven_rows("aha", n))
         fp = ctx.robot.footprint
         self.reach = footprint_radius(fp.length, fp.width) + cfg.margin_m
         self.path = Path(ctx.run_dir) / f"lanes-{self.me}.json"
@@ -99,14 +106,24 @@ class Lanes:
         except RpcError:  # no answer, or one that cannot be read: it may hold anything
             return None
 
+    def use(self, plan: PlanResult) -> None:
+        """Reserve the lanes ``plan`` drives (:func:`common.lanes.plan_lanes`)."""
+        self.map = plan_lanes(self.field, plan)
+
     def reserve(
-        self, legs: list[Leg], wait: Callable[[float], object], say: Callable[[str], None]
+        self,
+        legs: list[Leg],
+        wait: Callable[[float], object],
+        say: Callable[[str], None],
+        give_way: bool = False,
     ) -> None:
         """Hold every segment along ``legs`` (and those held already), waiting with
         ``wait(seconds)`` (which raises to give up: an abort) until the peers allow
-        it; ``say`` is told once per reason to wait."""
+        it; ``say`` is told once per reason to wait. With ``give_way``, raises GiveWay
+        when a peer named first and this robot wait for each other (seen twice in a
+        row), having forgotten what it wanted."""
         want = self.map.along(legs, self.reach)
-        said = ""
+        said, stuck = "", 0
         while True:
             with self._lock:
                 self.claims.wanted = want - self.claims.held
@@ -123,13 +140,20 @@ class Lanes:
             if verdict.why != said:
                 say(f"lanes: waiting, {verdict.why}")
                 said = verdict.why
-            if verdict.back_off:
-                with self._lock:
+            with self._lock:
+                held = set(self.claims.held)
+                self.claims.waiting = {s for a in answers.values() if a for s in a.held} & want
+                if verdict.back_off:
                     self.claims.wanted = set()
+                self._save()
+            peer = deadlocked(self.me, held, want, answers)
+            stuck = stuck + 1 if peer else 0
+            if give_way and stuck >= 2:
+                with self._lock:
+                    self.claims.waiting = set()
                     self._save()
-                wait(2 * self.cfg.retry_s)
-            else:
-                wait(self.cfg.retry_s)
+                raise GiveWay(f"{peer} waits for where this robot stands and holds its way")
+            wait(2 * self.cfg.retry_s if verdict.back_off else self.cfg.retry_s)
         if said:
             say("lanes: reserved, driving on")
 

@@ -73,21 +73,41 @@ def decide(me: str, wanted: set[str], answers: Mapping[str, LaneClaims | None]) 
     return GRANTED
 
 
+def deadlocked(
+    me: str, held: set[str], wanted: set[str], answers: Mapping[str, LaneClaims | None]
+) -> str:
+    """The peer ``me`` and it wait for each other: it holds some of what ``me`` wants
+    and waits for some of what ``me`` holds, and is named first, so ``me`` is the
+    one to give way (its mission surveys another location first); "" when none."""
+    for robot, a in sorted(answers.items()):
+        if a is not None and robot < me and wanted & set(a.held) and held & set(a.waiting):
+            return robot
+    return ""
+
+
 @dataclasses.dataclass
 class Claims:
-    """One robot's reservations: what it holds and wants."""
+    """One robot's reservations: what it holds and wants, and waits for."""
 
     held: set[str] = dataclasses.field(default_factory=set)
     wanted: set[str] = dataclasses.field(default_factory=set)
+    waiting: set[str] = dataclasses.field(default_factory=set)
 
     def answer(self, robot: str) -> LaneClaims:
-        return LaneClaims(robot=robot, held=sorted(self.held), wanted=sorted(self.wanted))
+        return LaneClaims(
+            robot=robot,
+            held=sorted(self.held),
+            wanted=sorted(self.wanted),
+            waiting=sorted(self.waiting),
+        )
 
     def grant(self) -> None:
         self.held |= self.wanted
         self.wanted = set()
+        self.waiting = set()
 
     def keep(self, segments: set[str]) -> None:
         """Release every held segment but ``segments``; forget what was wanted."""
         self.held &= segments
         self.wanted = set()
+        self.waiting = set()

@@ -184,6 +184,8 @@ class MissionService:
         """Run the survey of ``log`` on a worker; the operator's abort and pause are
         set (or cleared) by the caller, before planning."""
         self.mission, self.log = name, log
+        if self.lanes is not None and self.plan is not None:
+            self.lanes.use(self.plan)
         if self._paused.is_set():
             log.set_state("paused")  # a pause sent while planning outlives a restart too
         self.survey = Survey(

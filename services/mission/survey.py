@@ -69,6 +69,7 @@ class Survey:
     ) -> None:
         self.ctx, self.cfg, self.log, self.event = ctx, cfg, log, event
         self.lanes = lanes  # the reservations with robots sharing the field, if any
+        self.give_way = False  # on a deadlock, raise GiveWay (the walk has elsewhere to go)
         self.mission = mission
         self.wake, self.abort, self.paused = wake, abort, paused
         self.pose, self.progress, self.scanner = feeds.pose, feeds.progress, feeds.scanner
@@ -156,7 +157,8 @@ class Survey:
         length = legs_length(seg.legs)
         limit_ns = int((self.cfg.route_time_s + length / self.cfg.route_min_speed) * NS)
         if self.lanes is not None:
-            self.lanes.reserve(seg.legs, self.wait, lambda text: self.event("info", text))
+            say = lambda text: self.event("info", text)  # noqa: E731
+            self.lanes.reserve(seg.legs, self.wait, say, give_way=self.give_way)
         why = ""
         for attempt in range(self.cfg.blocked_retries + 1):
             # every route sent gets a new id: navigation keeps publishing an ended

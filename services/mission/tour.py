@@ -1,7 +1,9 @@
 """The survey's walk through its locations, in tour order, as the mission log lists
 them: position, scan (with retries, each re-checking the pose) and record each one;
 a location a restart left mid-scan is taken from the scanner when it finished there;
-the battery is looked at before each drive (:mod:`.battery`).
+the battery is looked at before each drive (:mod:`.battery`); a location whose way
+another robot blocks while waiting for this one is put off until the others
+(:mod:`.lanes`).
 The mission service (:mod:`.service`) runs it on its worker thread and owns the
 phase, the events and what happens before and after."""
 
@@ -9,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections import Counter
 from typing import Protocol
 
 import msgspec
@@ -18,9 +21,13 @@ from common.messages.mission import MissionPhase
 from services.mission.battery import BatteryWatch
 from services.mission.config import MissionConfig
 from services.mission.feeds import Aborted
+from services.mission.lanes import GiveWay
 from services.mission.log import MissionLog
 from services.mission.plan import Segment
 from services.mission.survey import Survey
+
+# how many times a location gives way to another robot before it waits its turn
+GIVE_WAY_TIMES = 3
 
 
 class Host(Protocol):
@@ -46,9 +53,10 @@ def walk(
     location is begun. ``battery`` sees every location before the robot drives to it
     (and may send the robot for a swap first)."""
     by_cand = {s.cand_id: s for s in segs if s.cand_id is not None}
-    for step in log.steps():
-        if step.status in ("done", "failed", "skipped"):
-            continue
+    todo = [s.idx for s in log.steps() if s.status not in ("done", "failed", "skipped")]
+    gave_way: Counter[int] = Counter()
+    while todo:
+        step = log.steps()[todo.pop(0)]
         if wake.is_set():  # aborted while planning: not one route sent
             raise Aborted
         host.current = step.scan_id
@@ -63,7 +71,15 @@ def walk(
         seg = by_cand[step.cand_id]
         if battery is not None and log.steps()[step.idx].status in ("pending", "driving"):
             seg = battery.before(step, seg)
-        visit(host, log, sv, cfg, step.idx, seg, tag)
+        # another robot and this one wait for each other: this one goes elsewhere
+        # first, a few times a location, and then waits its turn
+        sv.give_way = bool(todo) and gave_way[step.idx] < GIVE_WAY_TIMES
+        try:
+            visit(host, log, sv, cfg, step.idx, seg, tag)
+        except GiveWay as exc:
+            gave_way[step.idx] += 1
+            host.event("info", f"{tag}: later: {exc}")
+            todo.append(step.idx)
 
 
 def visit(

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from common.field import load_field
-from common.lanes import LaneMap, footprint_radius
+from common.lanes import LaneMap, driven_rows, footprint_radius
 from common.messages.nav import Leg
 
 
@@ -46,3 +46,19 @@ def test_a_leg_along_a_cross_lane_passes_its_segments_and_the_ends(engr: LaneMap
     # side of the lane the row-gap lanes' at each intersection passed
     assert got == {"c3.0", "c3.1", "c3.2"} | {f"r{j}.{k}" for j in (0, 1, 2) for k in (2, 3)}
     assert engr.along([], 0.6) == set()
+
+
+def test_only_the_lanes_a_survey_drives_are_cut() -> None:
+    _, fld = load_field("engr")
+    nx, ny = len(fld.cross_lanes_x), len(fld.row_lanes_y)
+    assert driven_rows("aha", ny) == [0, ny - 1]
+    assert driven_rows("br", ny) == list(range(ny))
+    assert driven_rows("lanes", ny, [2, 0, 2]) == [0, 2]
+    aha = LaneMap(fld, driven_rows("aha", ny))
+    assert len(aha.ids) == nx * (ny - 1) + 2 * (nx - 1)
+    # two robots at the ends of a row gap, in neighbouring alleys: in no common segment
+    ends = np.array(
+        [[fld.cross_lanes_x[2], fld.row_lanes_y[1]], [fld.cross_lanes_x[3], fld.row_lanes_y[1]]]
+    )
+    a, b = aha.at(ends, footprint_radius(0.99, 0.67))
+    assert a and b and not a & b

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.messages.mission import LaneClaims
-from services.mission.reservation import Claims, decide
+from services.mission.reservation import Claims, deadlocked, decide
 
 ROBOTS = ("r1", "r2", "r3")
 SEGMENTS = ("a", "b", "c")
@@ -126,3 +126,15 @@ def test_a_robot_waiting_for_a_held_segment_lets_the_holder_drive_away() -> None
         if "b" in robots["r1"].claims.held:
             break
     assert "b" in robots["r1"].claims.held, [(r.name, r.claims) for r in robots.values()]
+
+
+def test_two_robots_each_standing_in_the_others_way_the_later_named_gives_way() -> None:
+    # r1 stands in a and waits for b; r2 stands in b and wants a
+    r1 = LaneClaims(robot="r1", held=["a"], waiting=["b"])
+    r2 = LaneClaims(robot="r2", held=["b"], waiting=["a"])
+    assert deadlocked("r2", {"b"}, {"a", "b"}, {"r1": r1}) == "r1"
+    assert deadlocked("r1", {"a"}, {"a", "b"}, {"r2": r2}) == ""  # named first: it waits
+    # r1 waits for something else: no deadlock, r2 just waits
+    other = LaneClaims(robot="r1", held=["a"], waiting=["c"])
+    assert deadlocked("r2", {"b"}, {"a", "b"}, {"r1": other}) == ""
+    assert deadlocked("r2", {"b"}, {"a", "b"}, {"r1": None}) == ""
