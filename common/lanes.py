@@ -16,10 +16,9 @@ than a segment's length and one of them would have to pass the other: the
 reservations (:mod:`services.mission.lanes`) keep that from happening, and the
 evaluation checks it on the robots' true positions.
 
-Robots sharing a field park off the lanes (:func:`homes`): robot k beside the
-field's edge lane, facing the edge lane's intersection 2(k-1) cross lanes from the
-Origin, ``PARK_M`` outside it. A robot at home is in no lane segment, so one that
-has finished, or waits there, is in nobody's way. Pure.
+Robots sharing a field park off the lanes (:func:`homes`), beside the field's two
+edge lanes in turn, ``PARK_M`` outside them. A robot at home is in no lane segment,
+so one that has finished, or waits there, is in nobody's way. Pure.
 """
 
 from __future__ import annotations
@@ -110,22 +109,27 @@ def footprint_radius(length: float, width: float) -> float:
 
 def homes(xs: F64, ys: F64, origin: F64, robots: int) -> tuple[F64, F64]:
     """(access, home), each (robots, 2), for a field of cross lanes at ``xs`` and
-    row-gap lanes at ``ys`` surveyed from ``origin``: robot k's lane intersection on
-    the Origin's edge lane, ``HOME_STRIDE`` cross lanes apart from the Origin's
-    inwards, and its parking place ``PARK_M`` outside the field beyond it.
-    ValueError, one line, when the edge lane has too few intersections for them."""
+    row-gap lanes at ``ys`` surveyed from ``origin``: the robots take the two edge
+    lanes in turn, the first the Origin's and the second the opposite one, so that
+    two robots enter the field's alleys from either end; on each edge lane they are
+    ``HOME_STRIDE`` cross lanes apart from the Origin's cross lane inwards. Robot k's
+    access is its intersection on its edge lane, its home the place ``PARK_M``
+    outside the field beyond it. ValueError, one line, when an edge lane has too few
+    intersections for them."""
     k0 = int(np.argmin(np.abs(xs - origin[0])))
     j0 = int(np.argmin(np.abs(ys - origin[1])))
+    edges = (j0, len(ys) - 1 - j0)
     inward = 1 if k0 == 0 else -1
-    ks = [k0 + inward * HOME_STRIDE * r for r in range(robots)]
+    ks = [k0 + inward * HOME_STRIDE * (r // 2) for r in range(robots)]
     if not all(0 <= k < len(xs) for k in ks):
         raise ValueError(
             f"{robots} robots park {HOME_STRIDE} cross lanes apart along "
-            f"the edge lane, and the field has {len(xs)} cross lanes"
+            f"the edge lanes, and the field has {len(xs)} cross lanes"
         )
-    access = np.array([[xs[k], ys[j0]] for k in ks], dtype=np.float64)
-    outward = -1.0 if j0 == 0 else 1.0
-    return access, access + np.array([0.0, outward * PARK_M])
+    js = [edges[r % 2] for r in range(robots)]
+    access = np.array([[xs[k], ys[j]] for k, j in zip(ks, js, strict=True)], dtype=np.float64)
+    outward = np.array([[0.0, -PARK_M if j == 0 else PARK_M] for j in js])
+    return access, access + outward
 
 
 def plan_lanes(field: Field, plan: PlanResult) -> LaneMap:

@@ -70,9 +70,10 @@ def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
         assert (p.legs[-1].x1, p.legs[-1].y1) == pytest.approx(p.home)
         # parked off the lanes: a robot at home stands in nobody's way
         assert lanes.at(np.array([p.home]), radius + 0.5) == [set()]
-    # each robot its own home, and the first on the Origin's cross lane
+    # each robot its own home: the first by the Origin, the second across the field
     one, two = (p.home for p in r.fleet.parts)
-    assert one[0] == pytest.approx(r.origin[0]) and abs(two[0] - one[0]) > 2 * radius
+    assert one[0] == pytest.approx(r.origin[0]) and one[1] < r.origin[1]
+    assert two[0] == pytest.approx(r.origin[0]) and two[1] > r.origin[1] + 10.0
     assert r.survey is not None and r.fleet.one_robot_s == r.survey.time_s
     assert r.fleet.makespan_s <= 0.6 * r.fleet.one_robot_s
     # each robot's waypoints beside the tour's
