@@ -20,6 +20,7 @@ from hypothesis import settings
 
 from common.config import zenoh_config
 from common.keys import Topic
+from common.messages.plan import PlanResult
 from common.process import free_loopback_port
 from common.transport import Bus
 
@@ -156,3 +157,16 @@ def record(bus: Bus, topic: Topic[M]) -> Record[M]:
     out: Record[M] = Record()
     bus.subscribe(topic, out.add)
     return out
+
+
+@pytest.fixture(scope="session")
+def engr_split() -> PlanResult:
+    """ENGR's plan split between two robots (each robot's share: ``share_of``)."""
+    from common.battery import Pace
+    from common.field import load_field
+    from common.messages.plan import PlanOptions
+    from services.planner.core import plan
+
+    layout, fld = load_field("engr")
+    opt = PlanOptions(robots=2, tour_time_limit_s=1.0, pace=Pace(speed=0.5, location_s=300.0))
+    return plan(layout, field=fld, options=opt)

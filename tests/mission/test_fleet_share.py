@@ -11,11 +11,9 @@ import msgspec
 import pytest
 
 from common import keys
-from common.battery import Pace
 from common.clock import WallClock
-from common.field import load_field
 from common.messages.mission import MissionAbort, MissionStart
-from common.messages.plan import PlanOptions, PlanResult
+from common.messages.plan import PlanResult
 from common.service import Context
 from common.transport import RequestError, RpcTimeout
 from phenorover.cli import main
@@ -23,15 +21,12 @@ from services.mission.config import MissionConfig
 from services.mission.plan import segments
 from services.mission.service import MissionService
 from services.mission.sources import own_share
-from services.planner.core import plan
 from tests.conftest import client
 
 
-@pytest.fixture(scope="module")
-def split() -> PlanResult:
-    layout, fld = load_field("engr")
-    opt = PlanOptions(robots=2, tour_time_limit_s=1.0, pace=Pace(speed=0.5, location_s=300.0))
-    return plan(layout, field=fld, options=opt)
+@pytest.fixture
+def split(engr_split: PlanResult) -> PlanResult:
+    return engr_split
 
 
 def test_the_shares_scan_every_location_once(split: PlanResult) -> None:

@@ -9,15 +9,12 @@ from typing import Any, cast
 import pytest
 
 from common import keys
-from common.battery import Pace
-from common.field import load_field
 from common.messages.mission import MissionEvent, MissionPhase, MissionState
 from common.messages.nav import PoseEstimate
-from common.messages.plan import PlanOptions, PlanResult
+from common.messages.plan import PlanResult
 from common.messages.sim import TruthPose
 from common.robot import default_robot
 from common.transport import Bus
-from services.planner.core import plan as make_plan
 from services.viz.fleet_view import FleetView
 from services.viz.scene import Entry
 
@@ -32,11 +29,9 @@ class FakeBus:
         self.subs[topic.key] = callback
 
 
-@pytest.fixture(scope="module")
-def split() -> PlanResult:
-    layout, fld = load_field("engr")
-    opt = PlanOptions(robots=2, tour_time_limit_s=1.0, pace=Pace(speed=0.5, location_s=300.0))
-    return make_plan(layout, field=fld, options=opt)
+@pytest.fixture
+def split(engr_split: PlanResult) -> PlanResult:
+    return engr_split
 
 
 def test_each_robot_is_drawn_under_its_namespace(split: PlanResult) -> None:
