@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import zenoh
 import zenoh.ext
@@ -15,6 +15,38 @@ from common.codec import encode
 from common.keys import Topic
 
 M = TypeVar("M")
+# how often a history topic's publisher announces its last sequence number (s)
+HEARTBEAT_S = 0.5
+
+
+def declare_publisher(session: zenoh.Session, topic: Topic[M], numbered: bool) -> Any:
+    """Zenoh's publisher for ``topic`` by its delivery class (:class:`common.keys.Topic`):
+    bulk BLOCK at low priority, control DROP at real-time priority, the rest DROP;
+    ``numbered`` (a message a lockstep step waits for) always BLOCK, since a dropped
+    one would be waited for. A history topic gets Zenoh's advanced publisher, cached
+    and sequenced: subscribers recover what a cut link lost (the heartbeat tells them
+    within a second of the link's return)."""
+    if topic.bulk:
+        cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
+    elif topic.control:
+        cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.REAL_TIME
+    else:
+        cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.DATA
+    if numbered:
+        cc = zenoh.CongestionControl.BLOCK
+    if not topic.history:
+        return session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
+    return zenoh.ext.declare_advanced_publisher(
+        session,
+        topic.key,
+        congestion_control=cc,
+        priority=prio,
+        cache=zenoh.ext.CacheConfig(max_samples=topic.history),
+        sample_miss_detection=zenoh.ext.MissDetectionConfig(
+            heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
+        ),
+        publisher_detection=True,
+    )
 
 
 class Latest(Generic[M]):

@@ -33,7 +33,7 @@ from common.lockstep import (
     parse_attachment,
 )
 from common.rpc import RequestError, RpcError, RpcTimeout, answer, first_reply
-from common.streams import Latest, Publisher, key_intersects
+from common.streams import Latest, Publisher, declare_publisher, key_intersects
 
 __all__ = ["Bus", "Latest", "Publisher", "RequestError", "RpcError", "RpcTimeout", "key_intersects"]
 
@@ -42,8 +42,6 @@ Q = TypeVar("Q")
 R = TypeVar("R")
 
 log = logging.getLogger(__name__)
-# how often a history topic's publisher announces its last sequence number (s)
-HEARTBEAT_S = 0.5
 
 
 class Bus:
@@ -134,32 +132,8 @@ class Bus:
         """A publisher on ``topic``; in lockstep its messages are numbered unless
         ``in_step`` is False (a heartbeat on the wall clock, which no step waits for)."""
         topic = topic.within(self.namespace)
-        if topic.bulk:
-            cc, prio = zenoh.CongestionControl.BLOCK, zenoh.Priority.DATA_LOW
-        elif topic.control:
-            cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.REAL_TIME
-        else:
-            cc, prio = zenoh.CongestionControl.DROP, zenoh.Priority.DATA
         numbered = self._inbox is not None and in_step
-        if numbered:
-            cc = zenoh.CongestionControl.BLOCK
-        pub: Any
-        if topic.history:
-            # cached and sequenced: subscribers recover what a cut link lost (the
-            # heartbeat tells them within a second of the link's return)
-            pub = zenoh.ext.declare_advanced_publisher(
-                self.session,
-                topic.key,
-                congestion_control=cc,
-                priority=prio,
-                cache=zenoh.ext.CacheConfig(max_samples=topic.history),
-                sample_miss_detection=zenoh.ext.MissDetectionConfig(
-                    heartbeat=HEARTBEAT_S, sporadic_heartbeat=None
-                ),
-                publisher_detection=True,
-            )
-        else:
-            pub = self.session.declare_publisher(topic.key, congestion_control=cc, priority=prio)
+        pub = declare_publisher(self.session, topic, numbered)
         self._handles.append(pub)
         return Publisher(pub, topic, self._stamp) if numbered else Publisher(pub, topic)
 
