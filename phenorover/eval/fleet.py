@@ -10,7 +10,8 @@ feeds its devices: it stands until the link is back). It plans the field for N
 robots, sends each robot the plan (each mission takes its share), can kill one
 robot's mission supervisor mid-survey (the launcher starts it again; it resumes from
 its log and its lane reservations from their file), and records every robot's true
-pose. :func:`score` then says, from the truth and the mission logs alone:
+pose. :func:`phenorover.eval.fleet_score.score` then says, from the truth and the
+mission logs alone:
 
 - the field time: from the first mission's start to the last one's end, sim time;
 - lane-segment conflicts: instants at which two robots' bodies reach one segment of
@@ -28,24 +29,19 @@ import signal
 import threading
 import time
 import tomllib
-from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import msgspec
-import numpy as np
 
 from common import keys
 from common.client import open_client, wait_alive
 from common.config import load_manifest
 from common.field import load_field
-from common.lanes import LaneMap, footprint_radius, plan_lanes
 from common.messages.mission import MissionStart, MissionState
 from common.messages.plan import PlanOptions, PlanResult
 from common.messages.sim import TruthPose
-from common.missionlog import read_log
 from common.process import free_loopback_port
-from common.robot import load_robot
 from common.transport import Bus
 from phenorover.eval.relay import Relay
 from phenorover.launcher import Launcher
@@ -81,10 +77,17 @@ def names(robots: int) -> list[str]:
 
 
 def write_deployment(
-    out: Path, field: Path, robots: int, rtf: float, seed: int, partition: str | None
+    out: Path,
+    field: Path,
+    robots: int,
+    rtf: float,
+    seed: int,
+    partition: str | None,
+    start: tuple[float, float, float] | None = None,
 ) -> tuple[Path, dict[str, Path], Relay | None]:
     """The world's and each robot's manifests under ``out`` (from ``deploy/fleet``'s,
-    on free loopback ports), and the relay of the partitioned robot's link."""
+    on free loopback ports), and the relay of the partitioned robot's link; ``start``:
+    the first robot's start pose instead of its home."""
     world = tomllib.loads((DEPLOY / "world.toml").read_text())
     port = free_loopback_port()
     world |= {"field": str(field), "run_dir": str(out / "world")}
@@ -94,6 +97,8 @@ def write_deployment(
     sim = world["services"]["sim"]
     sim |= {"real_time_factor": rtf, "seed": seed, "scan_dir": str(out)}
     sim["robots"] = [{"namespace": n} for n in names(robots)]
+    if start is not None:
+        sim["robots"][0]["start"] = list(start)
     docs: dict[str, dict[str, Any]] = {"world": world}
     relay = None
     for k, name in enumerate(names(robots), start=1):
@@ -144,9 +149,10 @@ def run(
     layout, fld = load_field(field)
     plan = make_plan(layout, field=fld, options=msgspec.structs.replace(options, robots=robots))
     cut = faults.partition[0] if faults.partition else None
-    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut)
-    if robots == 1:  # alone, the robot starts where a one-robot plan does: the Origin
-        _start_at_origin(world, fld.origin_xy)
+    # alone, the robot starts where a one-robot plan does: the Origin
+    origin = (float(fld.origin_xy[0]), float(fld.origin_xy[1]), 0.0)
+    start = origin if robots == 1 else None
+    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut, start)
     launchers = {"world": Launcher(world), **{n: Launcher(m) for n, m in rovers.items()}}
     outcome = Outcome(plan, {}, {n: [] for n in rovers}, {})
     try:
@@ -175,13 +181,6 @@ def run(
         if state is not None:
             outcome.run_dirs[name] = Path(load_manifest(m).run_dir) / state.mission
     return outcome
-
-
-def _start_at_origin(world: Path, origin: np.ndarray) -> None:
-    doc = tomllib.loads(world.read_text())
-    robots = doc["services"]["sim"]["robots"]
-    robots[0]["start"] = [float(origin[0]), float(origin[1]), 0.0]
-    world.write_bytes(msgspec.toml.encode(doc))
 
 
 def _survey(
@@ -257,77 +256,3 @@ def _start(bus: Bus, name: str, plan: PlanResult) -> MissionState:
         except RpcError as exc:
             if "no reply" not in str(exc) or time.monotonic() > deadline:
                 raise RuntimeError(f"{name}: mission did not start: {exc}") from None
-
-
-@dataclasses.dataclass(frozen=True)
-class Score:
-    field_s: float  # first start to last end, sim time
-    conflicts: int  # truth samples with two robots in one lane segment
-    closest_m: float  # the closest two robots came, true positions
-    missing: list[int]  # locations no robot scanned
-    twice: list[int]  # locations scanned more than once
-    per_robot: dict[str, int]  # locations each robot scanned
-    examples: list[str]
-
-
-def score(outcome: Outcome, field: Path, robot: str = "") -> Score:
-    """The outcome against the truth and the mission logs (see the module docstring);
-    ``robot``: the robot description (its footprint)."""
-    _, fld = load_field(field)
-    fp = load_robot(robot).footprint
-    reach = footprint_radius(fp.length, fp.width)
-    lanes = plan_lanes(fld, outcome.plan)  # the lanes the survey drives
-    created, done = [], []
-    scanned: Counter[int] = Counter()
-    per_robot = {}
-    for name, run_dir in outcome.run_dirs.items():
-        log = read_log(run_dir / "mission.db")
-        assert log.mission is not None
-        created.append(int(log.mission["created_ns"]))
-        ends = [
-            t
-            for t, _lvl, text in log.events
-            if text.startswith("mission ") and text.endswith(" done")
-        ]
-        done.append(max(ends) if ends else max(t for t, _l, _x in log.events))
-        ids = [s.cand_id for s in log.steps if s.status == "done"]
-        scanned.update(ids)
-        per_robot[name] = len(ids)
-    field_s = (max(done) - min(created)) / NS if done else float("nan")
-    selected = outcome.plan.selected
-    conflicts, closest, examples = _conflicts(outcome.truth, lanes, reach)
-    return Score(
-        field_s=field_s,
-        conflicts=conflicts,
-        closest_m=closest,
-        missing=sorted(set(selected) - set(scanned)),
-        twice=sorted(c for c, n in scanned.items() if n > 1),
-        per_robot=per_robot,
-        examples=examples,
-    )
-
-
-def _conflicts(
-    truth: dict[str, list[tuple[int, float, float]]], lanes: LaneMap, reach: float
-) -> tuple[int, float, list[str]]:
-    """Instants (truth samples of every robot at one sim time) at which two robots'
-    bodies reach one lane segment; the closest the robots came; a few examples."""
-    names_ = sorted(truth)
-    if len(names_) < 2:
-        return 0, float("inf"), []
-    per = {n: {t: (x, y) for t, x, y in truth[n]} for n in names_}
-    common = sorted(set.intersection(*(set(p) for p in per.values())))
-    if not common:
-        return 0, float("inf"), []
-    xy = {n: np.array([per[n][t] for t in common]) for n in names_}
-    inside = {n: lanes.distances(xy[n]) <= reach for n in names_}
-    count, closest, examples = 0, float("inf"), []
-    for i, a in enumerate(names_):
-        for b in names_[i + 1 :]:
-            both = (inside[a] & inside[b]).any(axis=1)
-            count += int(both.sum())
-            closest = min(closest, float(np.hypot(*(xy[a] - xy[b]).T).min()))
-            for k in np.flatnonzero(both)[:3]:
-                seg = lanes.ids[int(np.flatnonzero(inside[a][k] & inside[b][k])[0])]
-                examples.append(f"{a} and {b} in {seg} at {common[k] / NS:.1f} s")
-    return count, closest, examples

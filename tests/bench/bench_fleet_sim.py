@@ -36,7 +36,7 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2]
 from common.battery import Pace
 from common.config import dump_toml
 from common.messages.plan import PlanOptions
-from phenorover.eval import fleet
+from phenorover.eval import fleet, fleet_score
 from phenorover.eval.error_models import from_manifest
 from phenorover.eval.fields import engr_sized
 from phenorover.eval.results import Bench, Goal
@@ -66,7 +66,7 @@ def survey(out: Path, field: Path, robots: int, faults: fleet.Faults) -> dict[st
         n: None if s is None else (s.phase.value, s.scans_done, s.scans_total)
         for n, s in o.final.items()
     }
-    s = fleet.score(o, field)
+    s = fleet_score.score(o, field)
     print(robots, "robots:", finals, s, o.notes, flush=True)
     return {
         "wall_s": wall,

@@ -10,7 +10,7 @@ from pathlib import Path
 from common.battery import Pace
 from common.messages.mission import MissionPhase
 from common.messages.plan import PlanOptions
-from phenorover.eval import fleet
+from phenorover.eval import fleet, fleet_score
 from tests.conftest import REPO
 
 TINY = REPO / "tests" / "data" / "tiny.toml"
@@ -25,7 +25,7 @@ def test_two_robots_share_the_tiny_field_and_a_killed_supervisor_changes_nothing
     assert out.notes and "killed" in out.notes[0], out.notes
     for name, state in out.final.items():
         assert state is not None and state.phase == MissionPhase.DONE, (name, state)
-    s = fleet.score(out, TINY)
+    s = fleet_score.score(out, TINY)
     assert s.missing == [] and s.twice == [], s
     assert all(n >= 1 for n in s.per_robot.values()), s.per_robot  # both took a share
     assert s.conflicts == 0, s.examples
