@@ -84,6 +84,12 @@ class MissionLog:
         with self._lock:
             return select_steps(self.db)
 
+    def counts(self) -> tuple[int, int, int]:
+        """(done, failed or skipped, all) of the steps."""
+        steps = self.steps()
+        done = sum(s.status == "done" for s in steps)
+        return done, sum(s.status in ("failed", "skipped") for s in steps), len(steps)
+
     def next_step(self) -> Step | None:
         """The first step not finished (done, failed or skipped), in tour order."""
         return next((s for s in self.steps() if s.status not in FINISHED), None)

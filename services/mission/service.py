@@ -90,12 +90,7 @@ class MissionService:
         self.event_pub.put(MissionEvent(stamp_ns=now, mission=name, level=level, text=text))
 
     def state(self) -> MissionState:
-        done = failed = total = 0
-        if self.log is not None:
-            steps = self.log.steps()
-            total = len(steps)
-            done = sum(s.status == "done" for s in steps)
-            failed = sum(s.status in ("failed", "skipped") for s in steps)
+        done, failed, total = (0, 0, 0) if self.log is None else self.log.counts()
         return MissionState(
             stamp_ns=self.ctx.clock.now_ns(),
             mission=self.mission,
