@@ -20,11 +20,9 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from common import keys
 from common.clock import SimClock
-from common.field import FieldError, build_field, load_field
+from common.field import FieldError
 from common.field_geojson import field_frame, load_frame
 from common.geo import FieldFrame
 from common.keys import Topic
@@ -34,6 +32,7 @@ from common.messages.plan import PlanResult
 from common.messages.scan import ScannerState, ScannerStatus
 from common.service import Context
 from services.viz import clouds, scene, traits_view
+from services.viz.cells import plan_cells
 from services.viz.config import VizConfig
 from services.viz.fleet_view import FleetView
 from services.viz.outputs import Outputs
@@ -216,22 +215,12 @@ class VizService:
         self._submit(lambda: self._cells(plan))
 
     def _cells(self, plan: PlanResult) -> None:
-        candidates = []
-        with contextlib.suppress(FieldError):
-            candidates.append(build_field(plan.layout))
-        with contextlib.suppress(FieldError):
-            candidates.append(load_field(plan.field)[1])
-        field = scene.field_of(plan, candidates)
+        field, views, why = plan_cells(plan)
         if plan is self.plan:
             self.traits.field = field  # the traits' plots are this plan's
-        if field is None or plan.cell_views is None:
-            self.log.info("viz: plan %s: field cells not known here, plots only", plan.field)
-            return
-        views = np.asarray(plan.cell_views.numpy(), dtype=np.int64)
-        if len(views) != len(field.cell_boxes):
-            self.log.info("viz: plan %s: cells differ from the field's, plots only", plan.field)
-            return
-        if plan is self.plan:
+        if views is None or field is None:
+            self.log.info("viz: %s", why)
+        elif plan is self.plan:  # not a plan a newer one replaced meanwhile
             self._set_static([scene.cell_entry(field, views)])
 
     def _on_state(self, s: MissionState) -> None:
