@@ -139,7 +139,7 @@ def estimate(visits: Sequence[Visit], end_m: float, battery: Battery, pace: Pace
     charge, time_s, drive_m, energy = full, 0.0, 0.0, 0.0
     swaps: list[int] = []
     feasible = True
-    home_m = 0.0  # the robot starts at the Origin
+    home_m = 0.0  # the robot starts with a full battery, nothing to go back for
     at_origin = True
 
     def spend(metres: float, standing_s: float) -> None:
@@ -151,7 +151,9 @@ def estimate(visits: Sequence[Visit], end_m: float, battery: Battery, pace: Pace
         time_s += pace.drive_s(metres) + standing_s
 
     for k, v in enumerate(visits):
-        to_m = v.from_origin_m if at_origin else v.to_m
+        # the first leg leaves from where the legs start (the Origin, or a fleet
+        # robot's home); after a swap the robot leaves from the Origin
+        to_m = v.from_origin_m if at_origin and k > 0 else v.to_m
         if must_swap(charge, battery, pace, to_m, pace.location_s, v.home_m):
             if not at_origin:
                 spend(home_m, 0.0)

@@ -107,20 +107,30 @@ def footprint_radius(length: float, width: float) -> float:
     return 0.5 * math.hypot(length, width)
 
 
-def homes(xs: F64, ys: F64, origin: F64, robots: int) -> tuple[F64, F64]:
+def homes(xs: F64, ys: F64, origin: F64, robots: int, near: F64 | None = None) -> tuple[F64, F64]:
     """(access, home), each (robots, 2), for a field of cross lanes at ``xs`` and
     row-gap lanes at ``ys`` surveyed from ``origin``: the robots take the two edge
     lanes in turn, the first the Origin's and the second the opposite one, so that
-    two robots enter the field's alleys from either end; on each edge lane they are
-    ``HOME_STRIDE`` cross lanes apart from the Origin's cross lane inwards. Robot k's
-    access is its intersection on its edge lane, its home the place ``PARK_M``
-    outside the field beyond it. ValueError, one line, when an edge lane has too few
-    intersections for them."""
+    two robots enter the field's alleys from either end. On each edge lane they are
+    ``HOME_STRIDE`` cross lanes apart: from the Origin's cross lane inwards, or with
+    ``near`` (the survey's locations, (M, 2)) around the cross lane nearest them all
+    (:func:`central_cross_lane`), so that no robot drives the length of the field
+    before its first scan and after its last. Robot k's access is its intersection on
+    its edge lane, its home the place ``PARK_M`` outside the field beyond it.
+    ValueError, one line, when an edge lane has too few intersections for them."""
     k0 = int(np.argmin(np.abs(xs - origin[0])))
     j0 = int(np.argmin(np.abs(ys - origin[1])))
     edges = (j0, len(ys) - 1 - j0)
-    inward = 1 if k0 == 0 else -1
-    ks = [k0 + inward * HOME_STRIDE * (r // 2) for r in range(robots)]
+    per_edge = (robots + 1) // 2
+    if near is None:
+        inward = 1 if k0 == 0 else -1
+        steps = [inward * i for i in range(per_edge)]
+    else:
+        k0 = central_cross_lane(xs, near)
+        # around the centre as long as both sides have room, then on the side that has
+        lo, hi = -(k0 // HOME_STRIDE), (len(xs) - 1 - k0) // HOME_STRIDE
+        steps = sorted(range(lo, hi + 1), key=lambda i: (abs(i), -i))[:per_edge]
+    ks = [k0 + HOME_STRIDE * steps[r // 2] if r // 2 < len(steps) else -1 for r in range(robots)]
     if not all(0 <= k < len(xs) for k in ks):
         raise ValueError(
             f"{robots} robots park {HOME_STRIDE} cross lanes apart along "
@@ -130,6 +140,16 @@ def homes(xs: F64, ys: F64, origin: F64, robots: int) -> tuple[F64, F64]:
     access = np.array([[xs[k], ys[j]] for k, j in zip(ks, js, strict=True)], dtype=np.float64)
     outward = np.array([[0.0, -PARK_M if j == 0 else PARK_M] for j in js])
     return access, access + outward
+
+
+def central_cross_lane(xs: F64, pts: F64) -> int:
+    """The cross lane (of those at ``xs``) whose intersections with the edge lanes are
+    nearest, in summed distance along the lanes, to the locations ``pts`` (M, 2): a
+    location is reached along an edge lane, then up its own cross lane, so only the
+    distance along the edge depends on the choice; the least sum is at the cross
+    lane nearest the median of the locations' x (ties to the lower index)."""
+    cost = np.abs(xs[:, None] - pts[None, :, 0]).sum(axis=1)
+    return int(np.argmin(cost))
 
 
 def plan_lanes(field: Field, plan: PlanResult) -> LaneMap:

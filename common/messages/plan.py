@@ -33,7 +33,12 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``. ``pace``: how fast the
     survey goes, for its time estimate and the swaps it foretells
     (:class:`common.battery.Pace`). ``robots``: how many robots share the survey
-    (the locations split between them, :mod:`services.planner.fleet`).
+    (the locations split between them, :mod:`services.planner.fleet`). ``home``:
+    where the robots start and end: ``origin``, one robot at the field's Origin (the
+    paper's survey), several parked along the edge lanes from the Origin's corner;
+    ``near``, parked beside the edge lanes by the cross lane nearest the chosen
+    locations (:func:`common.lanes.homes`), each robot's share a part of the plan,
+    one robot's too. The plan says where each robot parks.
     """
 
     nav: Literal["br", "aha", "lanes"] = "aha"
@@ -50,6 +55,7 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     open_cross: list[int] | None = None
     pace: Pace = msgspec.field(default_factory=Pace)
     robots: Annotated[int, msgspec.Meta(ge=1, le=8)] = 1
+    home: Literal["origin", "near"] = "origin"
 
 
 class Candidate(msgspec.Struct, frozen=True, kw_only=True):

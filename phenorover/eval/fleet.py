@@ -24,6 +24,7 @@ mission logs alone:
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import signal
 import threading
@@ -83,11 +84,11 @@ def write_deployment(
     rtf: float,
     seed: int,
     partition: str | None,
-    start: tuple[float, float, float] | None = None,
+    starts: list[tuple[float, float, float]] | None = None,
 ) -> tuple[Path, dict[str, Path], Relay | None]:
     """The world's and each robot's manifests under ``out`` (from ``deploy/fleet``'s,
-    on free loopback ports), and the relay of the partitioned robot's link; ``start``:
-    the first robot's start pose instead of its home."""
+    on free loopback ports), and the relay of the partitioned robot's link; ``starts``:
+    the robots' start poses (x, y, heading in degrees) instead of the world's homes."""
     world = tomllib.loads((DEPLOY / "world.toml").read_text())
     port = free_loopback_port()
     world |= {"field": str(field), "run_dir": str(out / "world")}
@@ -97,8 +98,8 @@ def write_deployment(
     sim = world["services"]["sim"]
     sim |= {"real_time_factor": rtf, "seed": seed, "scan_dir": str(out)}
     sim["robots"] = [{"namespace": n} for n in names(robots)]
-    if start is not None:
-        sim["robots"][0]["start"] = list(start)
+    for r, pose in zip(sim["robots"], starts or [], strict=False):
+        r["start"] = list(pose)
     docs: dict[str, dict[str, Any]] = {"world": world}
     relay = None
     for k, name in enumerate(names(robots), start=1):
@@ -119,7 +120,7 @@ def write_deployment(
         }
         rover["services"]["scanner"]["storage_dir"] = str(out / name / "scanner-card")
         mission = rover["services"]["mission"]
-        mission["share"] = k if robots > 1 else 0
+        mission["share"] = k if robots > 1 else 0  # one robot takes a plan's one part
         mission["lanes"] = {"peers": [n for n in names(robots) if n != name]}
         docs[name] = rover
     out.mkdir(parents=True, exist_ok=True)
@@ -128,6 +129,19 @@ def write_deployment(
         paths[name] = out / f"{name}.toml"
         paths[name].write_bytes(msgspec.toml.encode(doc))
     return paths.pop("world"), paths, relay
+
+
+def starts(plan: PlanResult) -> list[tuple[float, float, float]]:
+    """Where each robot of ``plan`` starts: at its home facing its way into the field,
+    or alone without one at the Origin, as a one-robot plan's tour begins."""
+    if plan.fleet is None:
+        return [(plan.origin[0], plan.origin[1], 0.0)]
+    out = []
+    for part in plan.fleet.parts:
+        first = part.legs[0]
+        facing = math.degrees(math.atan2(first.y1 - first.y0, first.x1 - first.x0))
+        out.append((part.home[0], part.home[1], facing))
+    return out
 
 
 def run(
@@ -149,10 +163,7 @@ def run(
     layout, fld = load_field(field)
     plan = make_plan(layout, field=fld, options=msgspec.structs.replace(options, robots=robots))
     cut = faults.partition[0] if faults.partition else None
-    # alone, the robot starts where a one-robot plan does: the Origin
-    origin = (float(fld.origin_xy[0]), float(fld.origin_xy[1]), 0.0)
-    start = origin if robots == 1 else None
-    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut, start)
+    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut, starts(plan))
     launchers = {"world": Launcher(world), **{n: Launcher(m) for n, m in rovers.items()}}
     outcome = Outcome(plan, {}, {n: [] for n in rovers}, {})
     try:

@@ -41,12 +41,15 @@ def requested_plan(
 
 
 def own_share(plan: PlanResult, share: int) -> PlanResult:
-    """What this robot surveys of ``plan``: the plan, or with ``share`` k its share of
-    a plan split between robots (``phenorover plan --robots N``). RequestError when
+    """What this robot surveys of ``plan``: the plan (the one part of a plan for one
+    robot parked by its locations), or with ``share`` k its share of a plan split
+    between robots (``phenorover plan --robots N``). RequestError when
     the two disagree: a split plan surveyed whole would scan every location twice."""
     if share == 0:
         if plan.fleet is not None and plan.share is None:
             n = len(plan.fleet.parts)
+            if n == 1:  # one robot parked by its locations: the one share is all of it
+                return plan.share_of(1)
             raise RequestError(
                 f"the plan is split between {n} robots: set this robot's share "
                 f"([services.mission] share, 1..{n})"

@@ -34,6 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--robots", type=int, default=1, help="robots sharing the survey (the slowest first)"
     )
     p.add_argument(
+        "--home",
+        choices=["origin", "near"],
+        default="origin",
+        help="where the robots start and end: the Origin's corner, or parked by the locations",
+    )
+    p.add_argument(
         "--speed", type=float, default=None, help="m/s along routes, for the survey's time"
     )
     p.add_argument(
@@ -110,7 +116,8 @@ def fleet_rows(r: PlanResult) -> list[tuple[str, str]]:
             (
                 f"robot {part.robot}",
                 f"{n} locations, about {e.time_s / 3600:.1f} h, {e.drive_m:.0f} m, "
-                f"{e.swaps} swaps: " + "-".join("Origin" if i == 0 else str(i) for i in part.order),
+                f"{e.swaps} swaps, parked at ({part.home[0]:.1f}, {part.home[1]:.1f}): "
+                + "-".join("home" if i == 0 else str(i) for i in part.order),
             )
         )
     rows.append(
@@ -179,6 +186,7 @@ def options(args: argparse.Namespace) -> PlanOptions:
         "min_hits": args.min_hits,
         "tour": args.tour,
         "robots": args.robots,
+        "home": args.home,
         "pace": {k: v for k, v in pace.items() if v is not None},
     }
     return msgspec.convert(given, PlanOptions)

@@ -145,7 +145,7 @@ def plan(
     survey = survey_estimate(legs, via, battery or Battery(), opt.pace)
     timings["legs"] = time.perf_counter() - t
     shares = None
-    if opt.robots > 1:
+    if opt.robots > 1 or opt.home == "near":
         t = time.perf_counter()
         shares = fleet(nav, pts, ids, via, battery or Battery(), opt, survey.time_s)
         timings["fleet"] = time.perf_counter() - t

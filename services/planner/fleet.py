@@ -28,7 +28,7 @@ from common.messages.nav import Leg
 from common.messages.plan import Fleet, FleetPart, PlanOptions
 from services.planner.route import Navigator
 from services.planner.swaps import survey_estimate
-from services.planner.tsp import gls_parameters
+from services.planner.tsp import gls_parameters, solve_tour
 from services.planner.waypoints import tour_legs
 
 # routing works in integers: deciseconds
@@ -77,9 +77,13 @@ def split_tours(
         raise ValueError(
             f"{robots} robots for {n - depots} locations: at most one robot a location"
         )
-    if robots == 1 or n <= 2:
+    if n <= 2:
         order = list(range(n))
         return Split([order], [tour_time(d, order, pace)], "trivial", time.perf_counter() - t0)
+    if robots == 1:  # every location costs the same time: the shortest tour is the fastest
+        tour = solve_tour(d, "auto", time_limit_s)
+        order = tour.order
+        return Split([order], [tour_time(d, order, pace)], tour.status, time.perf_counter() - t0)
     at = np.full(n, pace.location_s)
     at[:depots] = 0.0
     # the time of an arc: the drive, then the location's time at its end
@@ -142,10 +146,12 @@ def fleet(
     one_robot_s: float,
 ) -> Fleet:
     """The survey of ``pts`` (the Origin first) split between ``opt.robots`` robots,
-    each from and back to its home (:func:`common.lanes.homes`), each part's legs and time with
-    its swaps."""
+    each from and back to its home (:func:`common.lanes.homes`; by the Origin's corner,
+    or with ``opt.home`` ``near`` by the locations), each part's legs and time with its
+    swaps. One robot parked by its locations is a fleet of one."""
     check_lanes(nav, opt.robots)
-    access, parked = homes(nav.xs, nav.ys, pts[0], opt.robots)
+    near = pts[1:] if opt.home == "near" else None
+    access, parked = homes(nav.xs, nav.ys, pts[0], opt.robots, near)
     n = opt.robots
     pts = np.vstack([access, pts[1:]])
     ids = [*([None] * n), *ids[1:]]

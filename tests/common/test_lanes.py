@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from common.field import load_field
-from common.lanes import LaneMap, driven_rows, footprint_radius
+from common.lanes import (
+    HOME_STRIDE,
+    PARK_M,
+    LaneMap,
+    central_cross_lane,
+    driven_rows,
+    footprint_radius,
+    homes,
+)
 from common.messages.nav import Leg
 
 
@@ -62,3 +70,26 @@ def test_only_the_lanes_a_survey_drives_are_cut() -> None:
     )
     a, b = aha.at(ends, footprint_radius(0.99, 0.67))
     assert a and b and not a & b
+
+
+def test_robots_park_by_the_locations_when_the_plan_asks() -> None:
+    xs = np.arange(10, dtype=np.float64) * 4.5
+    ys = np.array([1.0, 2.8, 4.6, 6.4])
+    origin = np.array([xs[-1], ys[0]])
+    pts = np.array([[xs[3], 2.8], [xs[4], 4.6], [xs[4], 6.4], [xs[8], 2.8]])
+    assert central_cross_lane(xs, pts) == 4  # the median's lane
+    access, home = homes(xs, ys, origin, 2, near=pts)
+    # the two edge lanes, at the cross lane nearest the locations, not the Origin's
+    assert access.tolist() == [[xs[4], ys[0]], [xs[4], ys[-1]]]
+    assert home[:, 1].tolist() == pytest.approx([ys[0] - PARK_M, ys[-1] + PARK_M])
+    # more robots: HOME_STRIDE cross lanes apart around it, then where there is room
+    access, _ = homes(xs, ys, origin, 4, near=pts)
+    assert (access[:, 0] / 4.5).round().tolist() == [4, 4, 4 + HOME_STRIDE, 4 + HOME_STRIDE]
+    edge = np.array([[xs[0], 2.8]] * 3)
+    access, _ = homes(xs, ys, origin, 6, near=edge)
+    assert sorted((access[:, 0] / 4.5).round().astype(int).tolist()) == [0, 0, 2, 2, 4, 4]
+    # without: from the Origin's corner inwards
+    access, _ = homes(xs, ys, origin, 2)
+    assert access[:, 0].tolist() == [xs[-1], xs[-1]]
+    with pytest.raises(ValueError, match="12 robots park 2 cross lanes apart"):
+        homes(xs, ys, origin, 12, near=pts)

@@ -53,6 +53,12 @@ def test_a_share_that_does_not_fit_the_plan_is_one_line(split: PlanResult) -> No
         own_share(own_share(split, 1), 2)
     whole = msgspec.structs.replace(split, fleet=None)
     assert own_share(whole, 0) is whole
+    # one robot parked by its locations: its plan's one part is all of it
+    assert split.fleet is not None
+    alone = msgspec.structs.replace(
+        split, fleet=msgspec.structs.replace(split.fleet, parts=split.fleet.parts[:1])
+    )
+    assert own_share(alone, 0) == alone.share_of(1)
     with pytest.raises(RequestError, match="share 1: the plan is not split"):
         own_share(whole, 1)
 

@@ -10,10 +10,11 @@ import pytest
 
 from common.battery import Pace
 from common.field import build_field, load_field
-from common.lanes import LaneMap, footprint_radius
+from common.lanes import LaneMap, central_cross_lane, footprint_radius
 from common.messages.plan import PlanOptions
 from phenorover.cli import main
 from phenorover.eval.fields import engr_sized
+from services.planner.cli import fleet_rows
 from services.planner.core import plan
 from services.planner.fleet import check_lanes, split_tours, tour_time
 from services.planner.outputs import write_all
@@ -81,6 +82,39 @@ def test_a_field_of_600_plots_for_two_robots(tmp_path: Path) -> None:
     for p in r.fleet.parts:
         rows = list(csv.DictReader(files[f"waypoints-robot{p.robot}.csv"].open()))
         assert [int(x["scan_id"]) for x in rows if x["scan_id"]] == p.order[1:-1]
+
+
+def test_robots_parked_by_the_locations_drive_less_and_say_where(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    layout = engr_sized(8, 12, "f96")
+    opts = {
+        (n, home): PlanOptions(
+            robots=n, home=home, cover="greedy", tour_time_limit_s=1.0, pace=Pace(speed=0.3)
+        )
+        for n in (1, 2)
+        for home in ("origin", "near")
+    }
+    plans = {k: plan(layout, options=o) for k, o in opts.items()}
+    alone = plans[1, "origin"]
+    assert alone.fleet is None and alone.survey is not None
+    fld = build_field(layout)
+    pts = np.array([fld.cand_xy[list(fld.cand_ids).index(i)] for i in alone.selected])
+    central = fld.cross_lanes_x[central_cross_lane(fld.cross_lanes_x, pts)]
+    for n in (1, 2):
+        near = plans[n, "near"].fleet
+        assert near is not None and len(near.parts) == n
+        assert [p.home[0] for p in near.parts] == pytest.approx([central] * n)
+        for p in near.parts:  # the estimate leaves from home, not from the Origin
+            assert p.survey.drive_m == pytest.approx(sum(g.length for g in p.legs))
+        corner = plans[n, "origin"]
+        assert near.makespan_s < (corner.fleet.makespan_s if corner.fleet else alone.survey.time_s)
+    # one robot parked by its locations: a fleet of one on the shortest tour from there
+    one = plans[1, "near"]
+    assert one.fleet is not None and one.fleet.status == "optimal"
+    assert sorted(one.fleet.parts[0].order[1:-1]) == sorted(alone.selected)
+    rows = dict(fleet_rows(plans[2, "near"]))
+    assert f"parked at ({central:.1f}, " in rows["robot 1"]
 
 
 @pytest.mark.parametrize(
