@@ -9,15 +9,13 @@ there makes the robot back up along the leg and come in again (``BACKUP``).
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import math
-from collections.abc import Callable
 
 from common.geo import wrap_angle
 from common.messages.nav import LEASE_ENDED, Leg, NavState
 from services.nav.fine import Fine
 from services.nav.follower_config import FollowerConfig
+from services.nav.follower_types import Command, Phase, Tick, leg_length
 from services.nav.pursuit import (
     aim_at,
     along_remaining,
@@ -29,31 +27,6 @@ from services.nav.pursuit import (
 )
 
 __all__ = ["Command", "Follower", "FollowerConfig", "Phase"]
-
-
-class Phase(enum.Enum):
-    ALIGN = "align"
-    DRIVE = "drive"
-    FINAL = "final"
-    FINE = "fine"
-    BACKUP = "backup"
-
-
-@dataclasses.dataclass
-class Command:
-    v: float
-    w: float
-    state: NavState
-    leg: int
-    distance_to_go: float
-    cross_track: float
-    heading_error: float
-    event: str = ""  # set once when the route ends: arrived, blocked
-    detail: str = ""  # with an event: how it ended, for the log
-
-
-def _leg_len(leg: Leg) -> float:
-    return math.hypot(leg.x1 - leg.x0, leg.y1 - leg.y0)
 
 
 class Follower:
@@ -139,7 +112,7 @@ class Follower:
 
     def _remaining(self, x: float, y: float) -> float:
         leg = self.legs[self.leg]
-        rest = sum(_leg_len(lg) for lg in self.legs[self.leg + 1 :])
+        rest = sum(leg_length(lg) for lg in self.legs[self.leg + 1 :])
         return max(0.0, along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)) + rest
 
     def step(
@@ -156,7 +129,8 @@ class Follower:
         """The command for the pose estimate (x, y, yaw) at ``t`` (s);
         ``position_sd``: the estimate's position SD along its worse axis (m), which
         the fine phase's settle waits on; ``heading_sd`` (rad): no heading trim is
-        finer than it."""
+        finer than it. Each phase's handler returns its command, or None when the
+        phase has ended and the next one takes the same step."""
         dt = 0.0 if self._t is None else max(0.0, min(t - self._t, 0.5))
         self._t = t
         self.fine.position_sd, self.fine.heading_sd = position_sd, heading_sd
@@ -176,125 +150,148 @@ class Follower:
         heading = math.atan2(leg.y1 - leg.y0, leg.x1 - leg.x0)
         xte = cross_track(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
         herr = wrap_angle(yaw - heading)
-        togo = self._remaining(x, y)
-
-        def out(v: float, w: float, state: NavState, event: str = "", why: str = "") -> Command:
-            self._v, self._w, self.state = v, w, state
-            if why:
-                self.end_detail = why
-            return Command(v, w, state, self.leg, togo, xte, herr, event, why)
-
+        k = Tick(t, dt, x, y, yaw, obstacle, leg, heading, xte, herr, self._remaining(x, y))
         if t > self.lease_until:
-            return out(0.0, 0.0, NavState.FAILED, "failed", f"{LEASE_ENDED}: not renewed")
+            return self._out(k, 0.0, 0.0, NavState.FAILED, "failed", f"{LEASE_ENDED}: not renewed")
         if not localized:
-            return out(0.0, 0.0, NavState.NOT_LOCALIZED)
-        tol = math.radians(self.cfg.heading_tolerance_deg)
-        align = math.radians(self.cfg.align_tolerance_deg)
-        if self.phase == Phase.ALIGN:
-            aim = wrap_angle(yaw - aim_at(x, y, leg, self.cfg.lookahead_m))
-            if _leg_len(leg) <= self.cfg.goal_tolerance_m or abs(aim) <= align:
-                self.phase = Phase.DRIVE
-            else:
-                return out(0.0, self._rotate(-aim, dt), NavState.ROTATING)
-        if self.phase == Phase.BACKUP:
-            if along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1) < self._backup_to:
-                # pure pursuit in reverse: steer the robot's back along the leg
-                u = self.cfg.reapproach_speed
-                px, py = lookahead_point(
-                    x, y, leg.x1, leg.y1, leg.x0, leg.y0, self.cfg.final_lookahead_m
-                )
-                k = curvature(x, y, wrap_angle(yaw + math.pi), px, py)
-                w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, u * k))
-                return out(-u, w, NavState.POSITIONING)
+            return self._out(k, 0.0, 0.0, NavState.NOT_LOCALIZED)
+        for phase, handle in (
+            (Phase.ALIGN, self._align),
+            (Phase.BACKUP, self._backup),
+            (Phase.DRIVE, self._drive),
+            (Phase.FINE, self._fine),
+        ):
+            if self.phase == phase and (c := handle(k)) is not None:
+                return c
+        return self._final(k)
+
+    def _out(
+        self, k: Tick, v: float, w: float, state: NavState, event: str = "", why: str = ""
+    ) -> Command:
+        self._v, self._w, self.state = v, w, state
+        if why:
+            self.end_detail = why
+        return Command(v, w, state, self.leg, k.togo, k.xte, k.herr, event, why)
+
+    def _align(self, k: Tick) -> Command | None:
+        """Turn in place toward the leg's look-ahead point, then drive."""
+        aim = wrap_angle(k.yaw - aim_at(k.x, k.y, k.leg, self.cfg.lookahead_m))
+        if leg_length(k.leg) <= self.cfg.goal_tolerance_m or abs(aim) <= math.radians(
+            self.cfg.align_tolerance_deg
+        ):
             self.phase = Phase.DRIVE
-        if self.phase == Phase.DRIVE:
-            rem = along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)
-            if rem > self.cfg.goal_tolerance_m:
-                if obstacle:
-                    self._blocked_since = self._blocked_since if self._blocked_since else t
-                    if t - self._blocked_since > self.cfg.obstacle_timeout_s:
-                        return out(0.0, 0.0, NavState.BLOCKED, "blocked")
-                    return out(0.0, 0.0, NavState.WAITING_OBSTACLE)
-                self._blocked_since = None
-                # the look-ahead runs past the leg's end, so the robot stays on the
-                # line to the last centimetre instead of swerving at the goal point
-                last = self.leg + 1 == len(self.legs)
-                la = self.cfg.final_lookahead_m if last else self.cfg.lookahead_m
-                qx, qy, qyaw = predict(x, y, yaw, self._v, self._w, self.cfg.predict_s)
-                px, py = lookahead_point(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1, la, beyond=True)
-                k = curvature(qx, qy, qyaw, px, py)
-                # slow down to stop at the leg's end (v^2 = 2 a d), where the robot
-                # will be once the drivetrain has taken in this command
-                ahead = along_remaining(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1)
-                v_stop = math.sqrt(2.0 * self.cfg.max_accel * 0.5 * max(0.0, ahead))
-                v = min(self.speed_limit, max(self.cfg.min_speed, v_stop))
-                v = self._ramp(v, self._v, self.cfg.max_accel, dt)
-                w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, v * k))
-                # coming in again after backing up is part of the fine positioning
-                coming_in = self.fine.reapproaches > 0
-                return out(v, w, NavState.POSITIONING if coming_in else NavState.DRIVING)
-            last = self.leg + 1 == len(self.legs)
-            self.phase = Phase.FINE if last and self.cfg.fine else Phase.FINAL
-            self.fine.begin(t)
-        if self.phase == Phase.FINE:
-            # the planned heading; a scan at the start point (zero-length leg, no
-            # final_yaw) has none, and the robot scans as it stands. The position
-            # comes first, on the leg's heading: a skid-steer robot creeps only along
-            # its heading and backs up along the leg, so once turned to another
-            # planned heading it could no longer correct its place along the leg
-            along = _leg_len(leg) > 0
-            final = leg.final_yaw if leg.final_yaw is not None else heading if along else yaw
-            goal_yaw = final if self.fine.placed or not along else heading
-            ferr = wrap_angle(yaw - goal_yaw)
-            fine = self.fine
-            if abs(ferr) > tol and not fine.creeping:
-                # a large turn (the leg's heading to another planned one) is done
-                # coarsely first; the fine phase then settles and trims it
-                fine.hold(t)
-                return out(0.0, self._rotate(-ferr, dt), NavState.ROTATING)
-            if (
-                along
-                and abs(xte) > self.cfg.reapproach_tolerance_m
-                and abs(herr) <= tol
-                and fine.reapproach(t, xte)
-            ):
-                self.phase = Phase.BACKUP
-                self._backup_to = min(self.cfg.reapproach_m, _leg_len(leg))
-                self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
-                return out(0.0, 0.0, NavState.POSITIONING)
-            # the robot can only creep along its heading: the goal's offset that way
-            ahead = (leg.x1 - x) * math.cos(yaw) + (leg.y1 - y) * math.sin(yaw)
-            placed = fine.placed
-            # only a planned heading is trimmed to; the leg's own is held coarsely
-            v, w = fine.step(t, ahead, ferr if leg.final_yaw is not None else None)
-            if fine.placed != placed:
-                return out(0.0, 0.0, NavState.POSITIONING)  # the heading's turn next
-            if v or w or not fine.settled(t):
-                return out(v, w, NavState.POSITIONING)
-            c = self._arrive(out, x, y, ferr)
-            c.detail += f" ({fine.summary()})"
-            self.end_detail = c.detail  # and in every progress message after it
-            return c
-        # FINAL: rotate in place to the next leg's heading
+            return None
+        return self._out(k, 0.0, self._rotate(-aim, k.dt), NavState.ROTATING)
+
+    def _backup(self, k: Tick) -> Command | None:
+        """Back up along the leg to come in again (the fine phase's re-approach)."""
+        leg = k.leg
+        if along_remaining(k.x, k.y, leg.x0, leg.y0, leg.x1, leg.y1) >= self._backup_to:
+            self.phase = Phase.DRIVE
+            return None
+        # pure pursuit in reverse: steer the robot's back along the leg
+        u = self.cfg.reapproach_speed
+        px, py = lookahead_point(
+            k.x, k.y, leg.x1, leg.y1, leg.x0, leg.y0, self.cfg.final_lookahead_m
+        )
+        c = curvature(k.x, k.y, wrap_angle(k.yaw + math.pi), px, py)
+        w = max(-self.cfg.max_turn_rate, min(self.cfg.max_turn_rate, u * c))
+        return self._out(k, -u, w, NavState.POSITIONING)
+
+    def _drive(self, k: Tick) -> Command | None:
+        """Pure pursuit along the leg, waiting for obstacles, to its end."""
+        leg, cfg = k.leg, self.cfg
+        last = self.leg + 1 == len(self.legs)
+        if along_remaining(k.x, k.y, leg.x0, leg.y0, leg.x1, leg.y1) <= cfg.goal_tolerance_m:
+            self.phase = Phase.FINE if last and cfg.fine else Phase.FINAL
+            self.fine.begin(k.t)
+            return None
+        if k.obstacle:
+            self._blocked_since = self._blocked_since if self._blocked_since else k.t
+            if k.t - self._blocked_since > cfg.obstacle_timeout_s:
+                return self._out(k, 0.0, 0.0, NavState.BLOCKED, "blocked")
+            return self._out(k, 0.0, 0.0, NavState.WAITING_OBSTACLE)
+        self._blocked_since = None
+        # the look-ahead runs past the leg's end, so the robot stays on the
+        # line to the last centimetre instead of swerving at the goal point
+        la = cfg.final_lookahead_m if last else cfg.lookahead_m
+        qx, qy, qyaw = predict(k.x, k.y, k.yaw, self._v, self._w, cfg.predict_s)
+        px, py = lookahead_point(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1, la, beyond=True)
+        c = curvature(qx, qy, qyaw, px, py)
+        # slow down to stop at the leg's end (v^2 = 2 a d), where the robot
+        # will be once the drivetrain has taken in this command
+        ahead = along_remaining(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1)
+        v_stop = math.sqrt(2.0 * cfg.max_accel * 0.5 * max(0.0, ahead))
+        v = min(self.speed_limit, max(cfg.min_speed, v_stop))
+        v = self._ramp(v, self._v, cfg.max_accel, k.dt)
+        w = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, v * c))
+        # coming in again after backing up is part of the fine positioning
+        coming_in = self.fine.reapproaches > 0
+        return self._out(k, v, w, NavState.POSITIONING if coming_in else NavState.DRIVING)
+
+    def _fine(self, k: Tick) -> Command:
+        """Fine positioning at the route's end (:mod:`services.nav.fine`)."""
+        # the planned heading; a scan at the start point (zero-length leg, no
+        # final_yaw) has none, and the robot scans as it stands. The position
+        # comes first, on the leg's heading: a skid-steer robot creeps only along
+        # its heading and backs up along the leg, so once turned to another
+        # planned heading it could no longer correct its place along the leg
+        leg, fine, tol = k.leg, self.fine, math.radians(self.cfg.heading_tolerance_deg)
+        along = leg_length(leg) > 0
+        final = leg.final_yaw if leg.final_yaw is not None else k.heading if along else k.yaw
+        goal_yaw = final if fine.placed or not along else k.heading
+        ferr = wrap_angle(k.yaw - goal_yaw)
+        if abs(ferr) > tol and not fine.creeping:
+            # a large turn (the leg's heading to another planned one) is done
+            # coarsely first; the fine phase then settles and trims it
+            fine.hold(k.t)
+            return self._out(k, 0.0, self._rotate(-ferr, k.dt), NavState.ROTATING)
+        if (
+            along
+            and abs(k.xte) > self.cfg.reapproach_tolerance_m
+            and abs(k.herr) <= tol
+            and fine.reapproach(k.t, k.xte)
+        ):
+            self.phase = Phase.BACKUP
+            self._backup_to = min(self.cfg.reapproach_m, leg_length(leg))
+            self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
+            return self._out(k, 0.0, 0.0, NavState.POSITIONING)
+        # the robot can only creep along its heading: the goal's offset that way
+        ahead = (leg.x1 - k.x) * math.cos(k.yaw) + (leg.y1 - k.y) * math.sin(k.yaw)
+        placed = fine.placed
+        # only a planned heading is trimmed to; the leg's own is held coarsely
+        v, w = fine.step(k.t, ahead, ferr if leg.final_yaw is not None else None)
+        if fine.placed != placed:
+            return self._out(k, 0.0, 0.0, NavState.POSITIONING)  # the heading's turn next
+        if v or w or not fine.settled(k.t):
+            return self._out(k, v, w, NavState.POSITIONING)
+        c = self._arrive(k, ferr)
+        c.detail += f" ({fine.summary()})"
+        self.end_detail = c.detail  # and in every progress message after it
+        return c
+
+    def _final(self, k: Tick) -> Command:
+        """Rotate in place to the leg's final heading, then the next leg or the end."""
+        leg = k.leg
         if leg.final_yaw is not None:
-            ferr = wrap_angle(yaw - leg.final_yaw)
-            if abs(ferr) > tol:
-                return out(0.0, self._rotate(-ferr, dt), NavState.ROTATING)
+            ferr = wrap_angle(k.yaw - leg.final_yaw)
+            if abs(ferr) > math.radians(self.cfg.heading_tolerance_deg):
+                return self._out(k, 0.0, self._rotate(-ferr, k.dt), NavState.ROTATING)
         if self.leg + 1 < len(self.legs):
             self.leg += 1
             self.phase = Phase.ALIGN
-            return out(0.0, 0.0, NavState.DRIVING)
-        yaw_goal = leg.final_yaw if leg.final_yaw is not None else heading
-        return self._arrive(out, x, y, wrap_angle(yaw - yaw_goal) if _leg_len(leg) > 0 else 0.0)
+            return self._out(k, 0.0, 0.0, NavState.DRIVING)
+        yaw_goal = leg.final_yaw if leg.final_yaw is not None else k.heading
+        return self._arrive(k, wrap_angle(k.yaw - yaw_goal) if leg_length(leg) > 0 else 0.0)
 
-    def _arrive(self, out: Callable[..., Command], x: float, y: float, yaw_err: float) -> Command:
+    def _arrive(self, k: Tick, yaw_err: float) -> Command:
         """ARRIVED when the estimate is within the arrival tolerances of the route's
         end, FAILED (saying how far off) otherwise."""
         leg = self.legs[-1]
-        off = math.hypot(leg.x1 - x, leg.y1 - y)
+        off = math.hypot(leg.x1 - k.x, leg.y1 - k.y)
         what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"
         if off <= self.cfg.arrival_tolerance_m and abs(yaw_err) <= math.radians(
             self.cfg.arrival_heading_tolerance_deg
         ):
-            return out(0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
-        return out(0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")
+            return self._out(k, 0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
+        return self._out(k, 0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")

@@ -13,7 +13,8 @@ import pytest
 from common.geo import wrap_angle
 from common.messages.nav import Leg, NavState
 from services.nav.fine import pose_sds
-from services.nav.follower import Command, Follower, FollowerConfig
+from services.nav.follower import Follower, FollowerConfig
+from services.nav.follower_types import Tick
 
 
 def run(
@@ -196,22 +197,22 @@ def test_no_fine_positioning_when_disabled() -> None:
 
 
 def test_arrival_checks_the_heading_with_its_own_tolerance() -> None:
-    def out(v: float, w: float, state: NavState, event: str = "", why: str = "") -> Command:
-        return Command(v, w, state, 0, 0.0, 0.0, 0.0, event, why)
+    def at(x: float) -> Tick:
+        return Tick(0.0, 0.0, x, 0.0, 0.0, False, leg, 0.0, 0.0, 0.0, 0.0)
 
     # a route ended on the spot but 5 deg off its planned heading (pure pursuit arrives
     # at an angle while it closes a sideways offset): not arrived...
     leg = Leg(x0=0, y0=0, x1=1, y1=0, final_yaw=0.0)
     strict = Follower(FollowerConfig(fine=False))
     strict.start("r", [leg])
-    c = strict._arrive(out, 1.0, 0.0, math.radians(5.0))
+    c = strict._arrive(at(1.0), math.radians(5.0))
     assert c.state == NavState.FAILED and "+5.00 deg" in c.detail
     # ...unless the arrival's own heading tolerance allows it (the paper profile scans
     # wherever it stopped), whatever the in-place turn's tolerance
     loose = Follower(FollowerConfig(fine=False, arrival_heading_tolerance_deg=180.0))
     loose.start("r", [leg])
-    assert loose._arrive(out, 1.0, 0.0, math.radians(5.0)).state == NavState.ARRIVED
-    assert loose._arrive(out, 1.1, 0.0, 0.0).state == NavState.FAILED  # 10 cm off
+    assert loose._arrive(at(1.0), math.radians(5.0)).state == NavState.ARRIVED
+    assert loose._arrive(at(1.1), 0.0).state == NavState.FAILED  # 10 cm off
 
 
 def test_the_fine_phase_reads_the_worse_axis_and_an_unknown_covariance_as_infinite() -> None:
