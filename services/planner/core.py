@@ -8,7 +8,9 @@ import time
 
 import numpy as np
 import numpy.typing as npt
+import scipy.sparse as sp
 
+from common.arrays import F64
 from common.battery import Battery
 from common.field import Field, FieldLayout, ScannerModel, build_field
 from common.messages.core import Array
@@ -73,6 +75,7 @@ def plan(
     (such as a lane index outside the field)."""
     scanner = scanner or ScannerModel()
     opt = options or PlanOptions()
+    battery = battery or Battery()
     timings: dict[str, float] = {}
     t = time.perf_counter()
     fld = field if field is not None else build_field(layout)
@@ -81,52 +84,106 @@ def plan(
     nav = Navigator(fld, opt.nav, opt.open_rows, opt.open_cross)
     timings["field"] = time.perf_counter() - t
 
-    t = time.perf_counter()
-    vis = compute_visibility(
-        fld,
-        scanner,
-        opt.visibility,
-        samples=opt.samples,
-        step_deg=opt.grid_step_deg,
-        progress=progress,
-        chunks=chunks,
-    )
-    timings["visibility"] = time.perf_counter() - t
-    every = vis.matrix(opt.min_hits)
+    every, vsum = _visibility(fld, scanner, opt, progress, chunks, targets)
+    timings["visibility"] = vsum.time_s
     # the cover, and every count of cells, only over the target cells
     mat = every if targets is None else every[:, np.flatnonzero(targets)]
     seen = np.asarray(mat.sum(axis=1)).ravel()
-    views = np.asarray(mat.sum(axis=0)).ravel()
-    near = vis.cell_min_range()
-    vsum = VisibilitySummary(
-        mode=vis.mode,
-        rays=vis.rays,
-        pairs=int(mat.nnz),
-        cells_seen_by_none=int((views == 0).sum()),
-        median_nearest_range=float(np.median(near[np.isfinite(near)])) if mat.nnz else 0.0,
-        time_s=timings["visibility"],
-    )
 
     t = time.perf_counter()
-    greedy = greedy_cover(mat, opt.coverage_target)
-    if opt.cover == "exact":
-        cover = exact_cover(
-            mat, opt.coverage_target, time_limit_s=opt.cover_time_limit_s, hint=greedy
-        )
-    else:
-        cover = greedy
+    cover, greedy_count = _cover(mat, opt)
     timings["cover"] = time.perf_counter() - t
-    log.info(
-        "cover: %d locations (%s), greedy %d",
-        len(cover.selected),
-        cover.status,
-        len(greedy.selected),
-    )
 
     t = time.perf_counter()
     sel = list(cover.selected)
     pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[sel]])
     ids: list[int | None] = [None, *(int(fld.cand_ids[j]) for j in sel)]
+    order, tour = _tour(fld, nav, opt, pts, ids, t)
+    timings["tour"] = tour.time_s
+
+    t = time.perf_counter()
+    legs = tour_legs(nav, pts, order, ids)
+    via = via_origin(nav, pts[0], pts[1:], [int(i or 0) for i in ids[1:]])
+    survey = survey_estimate(legs, via, battery, opt.pace)
+    timings["legs"] = time.perf_counter() - t
+    shares = None
+    if opt.robots > 1 or opt.home == "near":
+        t = time.perf_counter()
+        shares = fleet(nav, pts, ids, via, battery, opt, survey.time_s)
+        timings["fleet"] = time.perf_counter() - t
+    return PlanResult(
+        field=fld.name,
+        layout=layout,
+        scanner=scanner,
+        options=opt,
+        origin=(float(fld.origin_xy[0]), float(fld.origin_xy[1])),
+        plot_boxes=Array.of(fld.plot_boxes),
+        candidates=_candidates(fld, seen),
+        selected=[int(fld.cand_ids[j]) for j in sel],
+        visibility=vsum,
+        cover=_cover_summary(cover, opt.cover, greedy_count),
+        tour=tour,
+        legs=legs,
+        timings=timings,
+        cell_views=Array.of(np.asarray(every[sel].sum(axis=0), dtype=np.int64).ravel()),
+        via_origin=via,
+        survey=survey,
+        fleet=shares,
+    )
+
+
+def _cover(mat: sp.csr_matrix, opt: PlanOptions) -> tuple[Cover, int]:
+    """The locations covering ``mat``'s cells, and how many the greedy cover took."""
+    greedy = greedy_cover(mat, opt.coverage_target)
+    cover = greedy
+    if opt.cover == "exact":
+        cover = exact_cover(
+            mat, opt.coverage_target, time_limit_s=opt.cover_time_limit_s, hint=greedy
+        )
+    log.info(
+        "cover: %d locations (%s), greedy %d", len(cover.selected), cover.status,
+        len(greedy.selected),
+    )  # fmt: skip
+    return cover, len(greedy.selected)
+
+
+def _visibility(
+    fld: Field,
+    scanner: ScannerModel,
+    opt: PlanOptions,
+    progress: Progress | None,
+    chunks: Chunks | None,
+    targets: npt.NDArray[np.bool_] | None,
+) -> tuple[sp.csr_matrix, VisibilitySummary]:
+    """Which cells each candidate sees (over every cell), and its summary counted over
+    the ``targets``."""
+    t = time.perf_counter()
+    vis = compute_visibility(
+        fld, scanner, opt.visibility, samples=opt.samples, step_deg=opt.grid_step_deg,
+        progress=progress, chunks=chunks,
+    )  # fmt: skip
+    elapsed = time.perf_counter() - t
+    every = vis.matrix(opt.min_hits)
+    mat = every if targets is None else every[:, np.flatnonzero(targets)]
+    views = np.asarray(mat.sum(axis=0)).ravel()
+    near = vis.cell_min_range()
+    return every, VisibilitySummary(
+        mode=vis.mode,
+        rays=vis.rays,
+        pairs=int(mat.nnz),
+        cells_seen_by_none=int((views == 0).sum()),
+        median_nearest_range=float(np.median(near[np.isfinite(near)])) if mat.nnz else 0.0,
+        time_s=elapsed,
+    )
+
+
+def _tour(
+    fld: Field, nav: Navigator, opt: PlanOptions, pts: F64, ids: list[int | None], t0: float
+) -> tuple[list[int], TourSummary]:
+    """The tour of ``pts`` (the Origin first) as node indices, and its summary: its
+    bound when not proven optimal, the nearest-neighbour tour beside it and, on few
+    enough locations, the optimum under every navigation mode (the paper's comparison
+    of them); ``t0`` when the stage began."""
     dist = nav.distances(pts)
     tour = solve_tour(dist, opt.tour, opt.tour_time_limit_s)
     # how far from the optimum a tour not proven optimal can be
@@ -137,59 +194,34 @@ def plan(
         for mode in NAV_MODES:
             other = nav if mode == opt.nav else Navigator(fld, mode, opt.open_rows, opt.open_cross)
             by_nav[mode] = held_karp(other.distances(pts)).length
-    timings["tour"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    legs = tour_legs(nav, pts, tour.order, ids)
-    via = via_origin(nav, pts[0], pts[1:], [int(i or 0) for i in ids[1:]])
-    survey = survey_estimate(legs, via, battery or Battery(), opt.pace)
-    timings["legs"] = time.perf_counter() - t
-    shares = None
-    if opt.robots > 1 or opt.home == "near":
-        t = time.perf_counter()
-        shares = fleet(nav, pts, ids, via, battery or Battery(), opt, survey.time_s)
-        timings["fleet"] = time.perf_counter() - t
 
     def as_ids(order: list[int]) -> list[int]:
         return [0 if k == 0 else int(ids[k] or 0) for k in order] + [0]
 
-    return PlanResult(
-        field=fld.name,
-        layout=layout,
-        scanner=scanner,
-        options=opt,
-        origin=(float(fld.origin_xy[0]), float(fld.origin_xy[1])),
-        plot_boxes=Array.of(fld.plot_boxes),
-        candidates=[
-            Candidate(
-                id=int(fld.cand_ids[j]),
-                x=float(fld.cand_xy[j, 0]),
-                y=float(fld.cand_xy[j, 1]),
-                row_lane=int(fld.cand_row_lane[j]),
-                cross_lane=int(fld.cand_cross_lane[j]),
-                cells_seen=int(seen[j]),
-            )
-            for j in range(fld.n_candidates)
-        ],
-        selected=[int(fld.cand_ids[j]) for j in sel],
-        visibility=vsum,
-        cover=_cover_summary(cover, opt.cover, len(greedy.selected)),
-        tour=TourSummary(
-            nav=opt.nav,
-            order=as_ids(tour.order),
-            length=tour.length,
-            method=tour.method,
-            status=tour.status,
-            nn_length=nn.length,
-            nn_order=as_ids(nn.order),
-            length_by_nav=by_nav,
-            time_s=timings["tour"],
-            bound=bound,
-        ),
-        legs=legs,
-        timings=timings,
-        cell_views=Array.of(np.asarray(every[sel].sum(axis=0), dtype=np.int64).ravel()),
-        via_origin=via,
-        survey=survey,
-        fleet=shares,
+    return tour.order, TourSummary(
+        nav=opt.nav,
+        order=as_ids(tour.order),
+        length=tour.length,
+        method=tour.method,
+        status=tour.status,
+        nn_length=nn.length,
+        nn_order=as_ids(nn.order),
+        length_by_nav=by_nav,
+        time_s=time.perf_counter() - t0,
+        bound=bound,
     )
+
+
+def _candidates(fld: Field, seen: npt.NDArray[np.int64]) -> list[Candidate]:
+    """Every candidate location, with the target cells it sees."""
+    return [
+        Candidate(
+            id=int(fld.cand_ids[j]),
+            x=float(fld.cand_xy[j, 0]),
+            y=float(fld.cand_xy[j, 1]),
+            row_lane=int(fld.cand_row_lane[j]),
+            cross_lane=int(fld.cand_cross_lane[j]),
+            cells_seen=int(seen[j]),
+        )
+        for j in range(fld.n_candidates)
+    ]

@@ -38,7 +38,8 @@ from common.config import dump_toml
 from common.files import atomic_write, finite
 from common.robot import RUN_COPY, load_robot
 from services.register.config import RegisterRunConfig, add_config_arguments, resolve
-from services.register.pipeline import Registration, register
+from services.register.outcome import Registration
+from services.register.pipeline import register
 from services.register.report import build_report, markdown
 from services.register.runlog import Placement, RunData, RunError, load_run, scan_inputs
 

@@ -28,7 +28,7 @@ from matplotlib.patches import Rectangle
 from common.geo import wrap_angle
 from common.poses import F64, apply
 from services.register.metrics import subsample
-from services.register.pipeline import Registration
+from services.register.outcome import Registration
 from services.register.runlog import RunData
 
 DPI = 150

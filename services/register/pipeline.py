@@ -12,6 +12,7 @@ import dataclasses
 import logging
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -24,10 +25,6 @@ from common.pointcloud import PosedScan, read_e57
 from common.poses import F64, check_pose
 from services.register.graph import TargetObservation, optimise_graph
 from services.register.metrics import (
-    CloudDistance,
-    OverlapStats,
-    PointStats,
-    TargetStats,
     cloud_distance,
     merged,
     overlap_stats,
@@ -35,19 +32,32 @@ from services.register.metrics import (
     subsample,
     target_stats,
 )
+from services.register.outcome import (
+    MethodReport,
+    PairReport,
+    Pose,
+    Registration,
+    RegistrationReport,
+    ScanReport,
+)
 from services.register.refine import (
     PairsBy,
+    Prepared,
     RefineConfig,
     prepare,
     prior_sigmas,
     refine,
     select_pairs,
 )
-from services.register.spheres import SphereConfig, detect_spheres
-from services.register.targets import TargetConfig, match_targets, solve_targets
+from services.register.spheres import SphereConfig, SphereDetection, detect_spheres
+from services.register.targets import (
+    TargetConfig,
+    TargetSolution,
+    match_targets,
+    solve_targets,
+)
 
 log = logging.getLogger(__name__)
-Pose = list[list[float]]
 
 
 class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -76,84 +86,6 @@ class ScanInput:
     name: str = ""
 
 
-class ScanReport(msgspec.Struct, frozen=True, kw_only=True):
-    """Per scan: points read and kept after downsampling, spheres found (their fit
-    RMS, m), targets matched and whether they fixed the reference pose, and the poses
-    (4x4 field <- scanner, row-major lists); ``c2c_without_targets_pose`` when the
-    report has that method. ``file``: the scan file registered. ``sphere_centres``:
-    the centres found (scanner frame, m), ``sphere_targets`` the target each was
-    matched to (-1: none), so targets can be scored from the report alone."""
-
-    name: str
-    points: int
-    downsampled: int
-    spheres: int
-    sphere_rms: list[float]
-    targets: int
-    target_solved: bool
-    nav_pose: Pose
-    c2c_pose: Pose
-    target_pose: Pose
-    file: str = ""
-    sphere_centres: list[tuple[float, float, float]] = msgspec.field(default_factory=list)
-    sphere_targets: list[int] = msgspec.field(default_factory=list)
-    c2c_without_targets_pose: Pose | None = None
-
-
-class PairReport(msgspec.Struct, frozen=True, kw_only=True):
-    """One pairwise GICP (scan indices, overlap share, RMSE in m, kept or why not)."""
-
-    i: int
-    j: int
-    overlap: float
-    rmse: float
-    kept: bool
-    reason: str
-
-
-class MethodReport(msgspec.Struct, frozen=True, kw_only=True):
-    """A registration scored against the target-based reference, and its overlap
-    residuals (SCENE's scan point statistics; need no reference)."""
-
-    targets_vs_reference: TargetStats
-    points_vs_reference: PointStats | None
-    cloud_vs_reference: CloudDistance | None
-    overlap: OverlapStats | None = None
-
-
-class RegistrationReport(msgspec.Struct, frozen=True, kw_only=True):
-    """The registration report: per scan, per pair, per method, and timings (s);
-    ``time_s`` is the registration proper (read, downsample, spheres, C2C, targets).
-    ``c2c`` is navigation + C2C with the spheres in the pose graph when the refine
-    config uses them; ``c2c_without_targets`` then gives the clouds alone."""
-
-    scans: list[ScanReport]
-    pairs: list[PairReport]
-    navigation: MethodReport
-    c2c: MethodReport
-    target_based: MethodReport
-    timings: dict[str, float]
-    time_s: float
-    c2c_without_targets: MethodReport | None = None
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class Registration:
-    """The report plus per-scan poses of every method, the scans themselves (scanner
-    frame, with the C2C pose) for writing outputs, and per scan the sphere centres
-    found (scanner frame) with their target labels (-1: unmatched).
-    ``plain_poses``: the C2C poses without the spheres when the report has them."""
-
-    report: RegistrationReport
-    nav_poses: list[F64]
-    c2c_poses: list[F64]
-    target_poses: list[F64]
-    scans: list[PosedScan]
-    centres: list[F64]
-    labels: list[npt.NDArray[np.int64]]
-    plain_poses: list[F64] | None = None
-
-
 def _as_list(m: F64) -> Pose:
     return [[float(v) for v in row] for row in m]
 
@@ -161,49 +93,31 @@ def _as_list(m: F64) -> Pose:
 def register(
     scans: list[ScanInput], cfg: RegisterConfig | None = None, pairs_by: PairsBy | None = None
 ) -> Registration:
-    """Register ``scans`` (see the module docstring). Raises ValueError (naming the
-    file) for an unreadable scan or a bad pose. ``pairs_by``: where the pairs are
-    aligned (:mod:`.cluster`; default: here)."""
+    """Register ``scans`` (see the module docstring): read them, place them by
+    navigation and find their spheres, refine (C2C), solve the target-based reference,
+    then score every method against it. Raises ValueError (naming the file) for an
+    unreadable scan or a bad pose. ``pairs_by``: where the pairs are aligned
+    (:mod:`.cluster`; default: here)."""
     cfg = cfg or RegisterConfig()
     if not scans:
         raise ValueError("register: no scans given")
     timings: dict[str, float] = {}
-    t0 = t = time.perf_counter()
-    nav = [check_pose(s.nav_pose, f"{s.path}: navigation pose") for s in scans]
-    data: list[PosedScan] = []
-    for s, p in zip(scans, nav, strict=True):
-        first = read_e57(s.path)
-        if not first:
-            raise ValueError(f"{s.path}: E57 file holds no scan")
-        name = s.name or Path(s.path).stem
-        data.append(PosedScan(first[0].points, first[0].intensity, p, name))
-    timings["read"] = time.perf_counter() - t
-    log.info("read %d scans (%d points)", len(data), sum(len(d.points) for d in data))
-
-    t = time.perf_counter()
-    prepared = [prepare(d.points, cfg.refine) for d in data]
-    timings["downsample"] = time.perf_counter() - t
-
-    t = time.perf_counter()
+    t0 = time.perf_counter()
     rng = np.random.default_rng(cfg.seed)
-    found = [detect_spheres(d.points, d.intensity, cfg.spheres, rng) for d in data]
-    centres = [np.array([f.fit.centre for f in fs]).reshape(-1, 3) for fs in found]
-    timings["spheres"] = time.perf_counter() - t
-    log.info("spheres per scan: %s", [len(f) for f in found])
+    placed = _place(scans, cfg, rng, timings)
 
     t = time.perf_counter()
-    labels = match_targets(centres, nav, cfg.targets.match_radius)
     obs = [
-        TargetObservation(i, int(lab), centres[i][m])
-        for i in range(len(data))
-        for m, lab in enumerate(labels[i])
+        TargetObservation(i, int(lab), placed.centres[i][m])
+        for i in range(len(placed.data))
+        for m, lab in enumerate(placed.labels[i])
         if lab >= 0
     ]
-    c2c, pairs = refine(prepared, nav, cfg.refine, obs, pairs_by)
+    c2c, pairs = refine(placed.prepared, placed.nav, cfg.refine, obs, pairs_by)
     timings["c2c"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    tsol = solve_targets(centres, nav, cfg.targets)
+    tsol = solve_targets(placed.centres, placed.nav, cfg.targets)
     timings["targets"] = time.perf_counter() - t
     total = time.perf_counter() - t0
     log.info("registration took %.1f s", total)
@@ -212,58 +126,16 @@ def register(
     # what the clouds alone give (the paper's C2C), for comparison: the pose graph
     # again without the spheres
     plain = (
-        optimise_graph(nav, pairs, prior_sigmas(cfg.refine))
+        optimise_graph(placed.nav, pairs, prior_sigmas(cfg.refine))
         if cfg.refine.use_targets and obs
         else c2c
     )
-    samples = [subsample(d.points, cfg.sample_points, rng) for d in data]
-    # the full-resolution reference cloud, cropped like the C2C input
-    rmax = cfg.refine.max_range
-    full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
-    ref_cloud = merged(full, tsol.poses)
-    ref_tree = cKDTree(ref_cloud)  # once for every method scored against it
-    clouds = [(pr.points, pr.normals, cKDTree(pr.points)) for pr in prepared]
-    # every method's overlap residuals over the same pairs: those navigation put near
-    near = select_pairs(nav, cfg.refine.max_pair_distance)
-    cropped = [s[np.linalg.norm(s, axis=1) <= rmax] for s in samples]
-
-    def score(poses: list[F64], is_reference: bool) -> MethodReport:
-        pts, cloud = None, None
-        if not is_reference:
-            pts = point_stats(samples, poses, tsol.poses)
-            src = subsample(merged(samples, poses), cfg.cloud_points, rng)
-            cloud = cloud_distance(src, ref_cloud, ref_tree)
-        return MethodReport(
-            targets_vs_reference=target_stats(centres, labels, poses, tsol.centres),
-            points_vs_reference=pts,
-            cloud_vs_reference=cloud,
-            overlap=overlap_stats(clouds, cropped, poses, near, cfg.overlap_radius),
-        )
-
-    nav_r, c2c_r, tgt_r = score(nav, False), score(c2c, False), score(tsol.poses, True)
+    score = _scorer(placed, tsol, cfg, rng)
+    nav_r, c2c_r, tgt_r = score(placed.nav, False), score(c2c, False), score(tsol.poses, True)
     plain_r = score(plain, False) if plain is not c2c else None
     timings["metrics"] = time.perf_counter() - t
-    reports = [
-        ScanReport(
-            name=d.name,
-            points=len(d.points),
-            downsampled=len(pr.points),
-            spheres=len(fs),
-            sphere_rms=[f.fit.rms for f in fs],
-            targets=tsol.n_targets[k],
-            target_solved=tsol.solved[k],
-            nav_pose=_as_list(nav[k]),
-            c2c_pose=_as_list(c2c[k]),
-            target_pose=_as_list(tsol.poses[k]),
-            file=str(scans[k].path),
-            sphere_centres=[(float(c[0]), float(c[1]), float(c[2])) for c in centres[k]],
-            sphere_targets=[int(v) for v in labels[k]],
-            c2c_without_targets_pose=None if plain_r is None else _as_list(plain[k]),
-        )
-        for k, (d, pr, fs) in enumerate(zip(data, prepared, found, strict=True))
-    ]
     report = RegistrationReport(
-        scans=reports,
+        scans=_scan_reports(scans, placed, c2c, tsol, None if plain_r is None else plain),
         pairs=[
             PairReport(
                 i=p.i,
@@ -282,14 +154,118 @@ def register(
         timings=timings,
         time_s=total,
     )
-    out_scans = [dataclasses.replace(d, pose=p) for d, p in zip(data, c2c, strict=True)]
+    out_scans = [dataclasses.replace(d, pose=p) for d, p in zip(placed.data, c2c, strict=True)]
     return Registration(
         report,
-        nav,
+        placed.nav,
         c2c,
         tsol.poses,
         out_scans,
-        centres,
-        [np.asarray(lab, dtype=np.int64) for lab in labels],
+        placed.centres,
+        [np.asarray(lab, dtype=np.int64) for lab in placed.labels],
         None if plain_r is None else plain,
     )
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Placed:
+    """The scans read (``data``) at their navigation poses (``nav``), downsampled for
+    the refinement (``prepared``), with the spheres found in each (``found``, their
+    ``centres`` in the scanner frame and the target each is matched to, ``labels``)."""
+
+    nav: list[F64]
+    data: list[PosedScan]
+    prepared: list[Prepared]
+    found: list[list[SphereDetection]]
+    centres: list[F64]
+    labels: list[npt.NDArray[np.int64]]
+
+
+def _place(
+    scans: list[ScanInput], cfg: RegisterConfig, rng: np.random.Generator,
+    timings: dict[str, float],
+) -> _Placed:  # fmt: skip
+    t = time.perf_counter()
+    nav = [check_pose(s.nav_pose, f"{s.path}: navigation pose") for s in scans]
+    data: list[PosedScan] = []
+    for s, p in zip(scans, nav, strict=True):
+        first = read_e57(s.path)
+        if not first:
+            raise ValueError(f"{s.path}: E57 file holds no scan")
+        name = s.name or Path(s.path).stem
+        data.append(PosedScan(first[0].points, first[0].intensity, p, name))
+    timings["read"] = time.perf_counter() - t
+    log.info("read %d scans (%d points)", len(data), sum(len(d.points) for d in data))
+
+    t = time.perf_counter()
+    prepared = [prepare(d.points, cfg.refine) for d in data]
+    timings["downsample"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    found = [detect_spheres(d.points, d.intensity, cfg.spheres, rng) for d in data]
+    centres = [np.array([f.fit.centre for f in fs]).reshape(-1, 3) for fs in found]
+    timings["spheres"] = time.perf_counter() - t
+    log.info("spheres per scan: %s", [len(f) for f in found])
+    labels = match_targets(centres, nav, cfg.targets.match_radius)
+    return _Placed(nav, data, prepared, found, centres, labels)
+
+
+def _scorer(
+    placed: _Placed, tsol: TargetSolution, cfg: RegisterConfig, rng: np.random.Generator
+) -> Callable[[list[F64], bool], MethodReport]:
+    """Scores a method's poses against the target-based reference: the targets, and
+    unless it is the reference itself its scan points and cloud; and its overlap
+    residuals over the pairs navigation put near each other (the same for every
+    method)."""
+    data = placed.data
+    samples = [subsample(d.points, cfg.sample_points, rng) for d in data]
+    # the full-resolution reference cloud, cropped like the C2C input
+    rmax = cfg.refine.max_range
+    full = [d.points[np.linalg.norm(d.points, axis=1) <= rmax] for d in data]
+    ref_cloud = merged(full, tsol.poses)
+    ref_tree = cKDTree(ref_cloud)  # once for every method scored against it
+    clouds = [(pr.points, pr.normals, cKDTree(pr.points)) for pr in placed.prepared]
+    near = select_pairs(placed.nav, cfg.refine.max_pair_distance)
+    cropped = [s[np.linalg.norm(s, axis=1) <= rmax] for s in samples]
+
+    def score(poses: list[F64], is_reference: bool) -> MethodReport:
+        pts, cloud = None, None
+        if not is_reference:
+            pts = point_stats(samples, poses, tsol.poses)
+            src = subsample(merged(samples, poses), cfg.cloud_points, rng)
+            cloud = cloud_distance(src, ref_cloud, ref_tree)
+        return MethodReport(
+            targets_vs_reference=target_stats(placed.centres, placed.labels, poses, tsol.centres),
+            points_vs_reference=pts,
+            cloud_vs_reference=cloud,
+            overlap=overlap_stats(clouds, cropped, poses, near, cfg.overlap_radius),
+        )
+
+    return score
+
+
+def _scan_reports(
+    scans: list[ScanInput], placed: _Placed, c2c: list[F64], tsol: TargetSolution,
+    plain: list[F64] | None,
+) -> list[ScanReport]:  # fmt: skip
+    return [
+        ScanReport(
+            name=d.name,
+            points=len(d.points),
+            downsampled=len(pr.points),
+            spheres=len(fs),
+            sphere_rms=[f.fit.rms for f in fs],
+            targets=tsol.n_targets[k],
+            target_solved=tsol.solved[k],
+            nav_pose=_as_list(placed.nav[k]),
+            c2c_pose=_as_list(c2c[k]),
+            target_pose=_as_list(tsol.poses[k]),
+            file=str(scans[k].path),
+            sphere_centres=[(float(c[0]), float(c[1]), float(c[2])) for c in placed.centres[k]],
+            sphere_targets=[int(v) for v in placed.labels[k]],
+            c2c_without_targets_pose=None if plain is None else _as_list(plain[k]),
+        )
+        for k, (d, pr, fs) in enumerate(
+            zip(placed.data, placed.prepared, placed.found, strict=True)
+        )
+    ]

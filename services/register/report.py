@@ -34,7 +34,7 @@ from typing import Any
 import msgspec
 
 from common.geo import wrap_angle
-from services.register.pipeline import MethodReport, RegistrationReport
+from services.register.outcome import MethodReport, RegistrationReport
 from services.register.runlog import RunData
 
 Json = dict[str, Any]

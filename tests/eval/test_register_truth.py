@@ -16,7 +16,7 @@ from common.pointcloud import PosedScan, write_e57
 from common.poses import F64, apply, inv
 from phenorover.eval.register.cli import main
 from phenorover.eval.register.paper import TABLE1, compare
-from services.register.pipeline import ScanReport
+from services.register.outcome import ScanReport
 from services.sim.truth_file import ScanTruth, write_truth
 
 TARGETS = np.array([[2.0, 1.0, 1.2], [4.0, -1.0, 1.1], [6.0, 0.5, 1.3]])

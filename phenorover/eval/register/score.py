@@ -24,7 +24,7 @@ import numpy as np
 from common.arrays import I64
 from common.poses import F64, apply
 from services.register.metrics import PointStats, TargetStats, point_stats, subsample, target_stats
-from services.register.pipeline import Registration
+from services.register.outcome import Registration
 
 # (key in report.json, label)
 METHODS = (
