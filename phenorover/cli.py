@@ -19,7 +19,7 @@ from common.client import (
     wait_alive,
 )
 from common.config import ConfigError, load_manifest
-from common.service import setup_logging
+from common.service_args import setup_logging
 from common.status import format_table, query_alive
 from phenorover.cpu import CpuUse, Mark
 

@@ -37,7 +37,7 @@ class RegisterRunConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknow
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that choose the options (see the module docstring)."""
-    from common.service import add_job_arguments
+    from common.service_args import add_job_arguments
 
     add_job_arguments(p, NAME, "the PNG figures")
     p.add_argument("--laz-voxel", type=float, default=None, metavar="M", help="default 0.01")
@@ -47,7 +47,7 @@ def resolve(args: argparse.Namespace) -> tuple[RegisterRunConfig, Manifest | Non
     """The effective options and the manifest (None without ``--manifest``) from the
     flags of :func:`add_config_arguments`. Raises ConfigError, one line naming the
     file and the key."""
-    from common.service import resolve_config
+    from common.service_args import resolve_config
 
     overrides = list(args.set)
     if args.laz_voxel is not None:

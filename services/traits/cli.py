@@ -151,7 +151,7 @@ def add_command(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from common.service import setup_logging
+    from common.service_args import setup_logging
 
     p = argparse.ArgumentParser(prog="python -m services.traits", description=__doc__)
     add_arguments(p)

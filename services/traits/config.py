@@ -80,7 +80,7 @@ class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that choose the options (see the module docstring)."""
-    from common.service import add_job_arguments
+    from common.service_args import add_job_arguments
 
     add_job_arguments(p, NAME, "fieldmap.png")
 
@@ -89,7 +89,7 @@ def resolve(args: argparse.Namespace) -> tuple[TraitsConfig, Manifest | None]:
     """The effective options and the manifest (None without ``--manifest``) from the
     flags of :func:`add_config_arguments`. Raises ConfigError, one line naming the
     file and the key."""
-    from common.service import resolve_config
+    from common.service_args import resolve_config
 
     overrides = list(args.set)
     if args.figures is not None:
