@@ -176,25 +176,9 @@ def _bearing_guess(ring: F64) -> float:
 
 def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
     """Decode a plot FeatureCollection; raises FieldError naming ``source``."""
-    try:
-        fc = msgspec.json.decode(data, type=_Collection)
-    except msgspec.DecodeError as exc:
-        hint = " (every plot must be a Polygon Feature)" if "geometry" in str(exc) else ""
-        raise FieldError(f"{source}: {' '.join(str(exc).split())}{hint}") from None
-    if not fc.features:
-        raise FieldError(f"{source}: the FeatureCollection has no plot polygons")
-    if len(fc.features) > MAX_PLOTS:  # before converting any polygon
-        raise FieldError(
-            f"{source}: {len(fc.features):,} plot polygons, more than the {MAX_PLOTS:,} a "
-            "field may have"
-        )
+    fc = _decode(data, source)
     s = fc.settings
-    rings: list[F64] = []
-    for i, feat in enumerate(fc.features):
-        ring = feat.geometry.coordinates[0] if feat.geometry.coordinates else []
-        if len(ring) < 4 or any(len(p) < 2 for p in ring):
-            raise FieldError(f"{source}: feature {i} is not a polygon of at least 3 corners")
-        rings.append(np.array([p[:2] for p in ring], dtype=np.float64))
+    rings = _rings(fc, source)
     lon0, lat0 = rings[0][0]
     if not (-180 <= lon0 <= 180 and -90 <= lat0 <= 90):
         raise FieldError(f"{source}: first vertex ({lon0}, {lat0}) is not WGS84 lon, lat")
@@ -203,20 +187,7 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
     enu = [np.stack(frame.wgs84_to_map(r[:, 1], r[:, 0])[:2], axis=-1) for r in rings]
     bearing = s.row_bearing_deg if s.row_bearing_deg is not None else _bearing_guess(enu[0])
     frame = FieldFrame(lat0, lon0, 0.0, bearing)
-    boxes = np.zeros((len(rings), 6))
-    for i, (en, feat) in enumerate(zip(enu, fc.features, strict=True)):
-        xy = np.stack(frame.map_to_field(en[:, 0], en[:, 1]), axis=-1)
-        lo, hi = xy.min(axis=0), xy.max(axis=0)
-        area = 0.5 * abs(np.dot(xy[:-1, 0], xy[1:, 1]) - np.dot(xy[1:, 0], xy[:-1, 1]))
-        if area < 0.95 * float(np.prod(hi - lo)):
-            raise FieldError(
-                f"{source}: plot {i} is not an axis-aligned rectangle after rotating by "
-                f"row_bearing_deg={bearing:.2f}"
-            )
-        h = (feat.properties or {}).get("height", s.plot_height)
-        if not isinstance(h, int | float) or h <= 0:
-            raise FieldError(f"{source}: plot {i} has height={h!r}, expected metres > 0")
-        boxes[i] = [lo[0], lo[1], 0.0, hi[0], hi[1], float(h)]
+    boxes = _boxes(fc, enu, frame, bearing, source)
     cx, cy = (boxes[:, 0] + boxes[:, 3]) / 2, (boxes[:, 1] + boxes[:, 4]) / 2
     length = float(np.median(boxes[:, 3] - boxes[:, 0]))
     width = float(np.median(boxes[:, 4] - boxes[:, 1]))
@@ -233,14 +204,6 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
         [0.0, 0.0, boxes[:, 3].max() + s.headland_width, boxes[:, 4].max() + s.edge_width]
     )
     olat, olon, _ = frame.field_to_wgs84(shift[0], shift[1])
-
-    def gap(lo_col: int, hi_col: int, band: npt.NDArray[np.int64], n: int) -> float:
-        if n < 2:
-            return 1.0
-        lo = np.array([boxes[band == k, lo_col].min() for k in range(n)])
-        hi = np.array([boxes[band == k, hi_col].max() for k in range(n)])
-        return float(np.median(lo[1:] - hi[:-1]))
-
     try:
         layout = FieldLayout(
             name=s.name,
@@ -249,8 +212,8 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
             plot_length=length,
             plot_width=width,
             plot_height=float(np.median(boxes[:, 5])),
-            row_spacing=gap(1, 4, row, nrows),
-            alley_width=gap(0, 3, col, ncols),
+            row_spacing=_gap(boxes, 1, 4, row, nrows),
+            alley_width=_gap(boxes, 0, 3, col, ncols),
             headland_width=s.headland_width,
             edge_width=s.edge_width,
             voxel_x=s.voxel_x,
@@ -274,3 +237,61 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
         raise FieldError(f"{source}: {' '.join(str(exc).split())}") from None
     fieldbook.check(layout, field, source)  # plot ids unique (positions are by geometry)
     return layout, field
+
+
+def _decode(data: bytes, source: str) -> _Collection:
+    """The FeatureCollection, of at least one plot and at most ``MAX_PLOTS``."""
+    try:
+        fc = msgspec.json.decode(data, type=_Collection)
+    except msgspec.DecodeError as exc:
+        hint = " (every plot must be a Polygon Feature)" if "geometry" in str(exc) else ""
+        raise FieldError(f"{source}: {' '.join(str(exc).split())}{hint}") from None
+    if not fc.features:
+        raise FieldError(f"{source}: the FeatureCollection has no plot polygons")
+    if len(fc.features) > MAX_PLOTS:  # before converting any polygon
+        raise FieldError(
+            f"{source}: {len(fc.features):,} plot polygons, more than the {MAX_PLOTS:,} a "
+            "field may have"
+        )
+    return fc
+
+
+def _rings(fc: _Collection, source: str) -> list[F64]:
+    """Each plot's outer ring (lon, lat)."""
+    rings: list[F64] = []
+    for i, feat in enumerate(fc.features):
+        ring = feat.geometry.coordinates[0] if feat.geometry.coordinates else []
+        if len(ring) < 4 or any(len(p) < 2 for p in ring):
+            raise FieldError(f"{source}: feature {i} is not a polygon of at least 3 corners")
+        rings.append(np.array([p[:2] for p in ring], dtype=np.float64))
+    return rings
+
+
+def _boxes(fc: _Collection, enu: list[F64], frame: FieldFrame, bearing: float, source: str) -> F64:
+    """(P, 6) the plots' boxes in the field frame (before its shift to the boundary
+    corner): each ring rotated by the rows' bearing must be an axis-aligned rectangle,
+    its height its ``height`` property or the settings'."""
+    boxes = np.zeros((len(enu), 6))
+    for i, (en, feat) in enumerate(zip(enu, fc.features, strict=True)):
+        xy = np.stack(frame.map_to_field(en[:, 0], en[:, 1]), axis=-1)
+        lo, hi = xy.min(axis=0), xy.max(axis=0)
+        area = 0.5 * abs(np.dot(xy[:-1, 0], xy[1:, 1]) - np.dot(xy[1:, 0], xy[:-1, 1]))
+        if area < 0.95 * float(np.prod(hi - lo)):
+            raise FieldError(
+                f"{source}: plot {i} is not an axis-aligned rectangle after rotating by "
+                f"row_bearing_deg={bearing:.2f}"
+            )
+        h = (feat.properties or {}).get("height", fc.settings.plot_height)
+        if not isinstance(h, int | float) or h <= 0:
+            raise FieldError(f"{source}: plot {i} has height={h!r}, expected metres > 0")
+        boxes[i] = [lo[0], lo[1], 0.0, hi[0], hi[1], float(h)]
+    return boxes
+
+
+def _gap(boxes: F64, lo_col: int, hi_col: int, band: npt.NDArray[np.int64], n: int) -> float:
+    """The median gap between neighbouring bands (rows or columns) of plots."""
+    if n < 2:
+        return 1.0
+    lo = np.array([boxes[band == k, lo_col].min() for k in range(n)])
+    hi = np.array([boxes[band == k, hi_col].max() for k in range(n)])
+    return float(np.median(lo[1:] - hi[:-1]))
