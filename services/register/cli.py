@@ -40,7 +40,8 @@ from common.robot import RUN_COPY, load_robot
 from services.register.config import RegisterRunConfig, add_config_arguments, resolve
 from services.register.outcome import Registration
 from services.register.pipeline import register
-from services.register.report import build_report, markdown
+from services.register.report import build_report
+from services.register.report_md import markdown
 from services.register.runlog import Placement, RunData, RunError, load_run, scan_inputs
 
 log = logging.getLogger("phenorover.register")
