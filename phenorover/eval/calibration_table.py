@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from phenorover.eval.results import Figure, ResultError, format_value, load, target_text
+from phenorover.eval.bench_schema import Figure, ResultError, load
+from phenorover.eval.results import format_value, target_text
 
 HEADING = "## Calibration: the paper's field, its method and ours in the simulator"
 # how the benchmarks name their comparisons (they take these names from here): a

@@ -22,16 +22,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from phenorover.eval import calibration_table
-from phenorover.eval.results import (
-    BENCH_DIR,
-    BenchResult,
-    Figure,
-    ResultError,
-    format_value,
-    load,
-    now,
-    target_text,
-)
+from phenorover.eval.bench_schema import BenchResult, Figure, ResultError, load
+from phenorover.eval.results import BENCH_DIR, format_value, now, target_text
 
 #: The benchmarks `make bench` runs (tests/bench/bench_*.py), in the page's order.
 BENCHMARKS = {

@@ -13,19 +13,8 @@ from typing import Any
 import pytest
 
 from phenorover.eval import registration, render_results
-from phenorover.eval.results import (
-    SCHEMA,
-    Bench,
-    Goal,
-    ResultError,
-    Target,
-    format_value,
-    git_commit,
-    load,
-    seed_runs,
-    spread,
-    verdict,
-)
+from phenorover.eval.bench_schema import SCHEMA, Goal, ResultError, Target, load, verdict
+from phenorover.eval.results import Bench, format_value, git_commit, seed_runs, spread
 from tests.bench import bench_nav
 
 CLOSE = "an IMU's roll and pitch in the filter"
