@@ -40,6 +40,8 @@ from pathlib import Path
 
 import can
 
+from services.scanner.slcan_text import frame_line, is_hex, parse_frame
+
 log = logging.getLogger(__name__)
 
 # Lawicel status flags (the reply to F)
@@ -50,14 +52,9 @@ BUS_OFF_FLAGS = TX_FIFO_FULL | ERROR_WARNING | ERROR_PASSIVE | BUS_ERROR
 OK, BELL = b"\r", b"\a"
 VERSION, SERIAL_NUMBER = b"V1013\r", b"NFA01\r"  # python-can parses V as two 2-digit numbers
 BITRATE_CODES = "0123456789"  # S0 10k .. S8 1M, S9 83.3k (CANable)
-_HEX = frozenset("0123456789abcdefABCDEF")
 _MAX_LINE = 32  # the longest classic line, T + 8 id + dlc + 16 data, with room to spare
 _MAX_PENDING = 64 * 1024  # bytes for a host that stopped reading; beyond: frames dropped
 _LOGGED_BAD = 10  # bad lines logged one by one, then every 100th
-
-
-def _hex(s: str) -> bool:
-    return all(c in _HEX for c in s)
 
 
 class SlcanDevice(can.BusABC):
@@ -136,13 +133,7 @@ class SlcanDevice(can.BusABC):
             if not self.is_open:
                 self.dropped += 1
                 return
-            kind = "r" if msg.is_remote_frame else "t"
-            kind = kind.upper() if msg.is_extended_id else kind
-            ident = (
-                f"{msg.arbitration_id:08X}" if msg.is_extended_id else f"{msg.arbitration_id:03X}"
-            )
-            data = "" if msg.is_remote_frame else bytes(msg.data[: msg.dlc]).hex().upper()
-            self._write(f"{kind}{ident}{msg.dlc:d}{data}\r".encode(), frame=True)
+            self._write(frame_line(msg), frame=True)
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         deadline = None if timeout is None else time.monotonic() + timeout
@@ -239,7 +230,7 @@ class SlcanDevice(can.BusABC):
             self._transmit(raw, line)
         elif cmd == "S" and len(arg) == 1 and arg in BITRATE_CODES:
             self._config(lambda: setattr(self, "bitrate_code", arg))
-        elif cmd == "s" and len(arg) in (4, 6) and _hex(arg):
+        elif cmd == "s" and len(arg) in (4, 6) and is_hex(arg):
             self._config(lambda: None)  # register timing: accepted, the link has no bit time
         elif cmd in "OL" and not arg:
             self._open(listen_only=cmd == "L")
@@ -290,18 +281,9 @@ class SlcanDevice(can.BusABC):
         self._flags = 0  # read clears them; a lasting condition raises them again
 
     def _transmit(self, raw: bytes, line: str) -> None:
-        ext, remote = line[0] in "TR", line[0] in "rR"
-        n = 8 if ext else 3
-        ident, dlc, data = line[1 : 1 + n], line[1 + n : 2 + n], line[2 + n :]
-        if len(ident) != n or not _hex(ident) or len(dlc) != 1 or dlc not in "012345678":
-            self._bad(raw, "frame id or length malformed")
-            return
-        arb, size = int(ident, 16), int(dlc)
-        if len(data) != (0 if remote else 2 * size) or not _hex(data):
-            self._bad(raw, f"frame data does not match its length {size}")
-            return
-        if arb > (0x1FFFFFFF if ext else 0x7FF):
-            self._bad(raw, f"frame id {ident} out of range")
+        frame = parse_frame(line, self.tty_path)
+        if isinstance(frame, str):
+            self._bad(raw, frame)
             return
         if not self.is_open or self.listen_only:
             self._write(BELL)
@@ -311,15 +293,5 @@ class SlcanDevice(can.BusABC):
             self._flags |= BUS_OFF_FLAGS
             self._write(BELL)
             return
-        self._write(b"Z\r" if ext else b"z\r")
-        self._rx.append(
-            can.Message(
-                timestamp=time.time(),
-                arbitration_id=arb,
-                is_extended_id=ext,
-                is_remote_frame=remote,
-                dlc=size,
-                data=b"" if remote else bytes.fromhex(data),
-                channel=self.tty_path,
-            )
-        )
+        self._write(b"Z\r" if frame.is_extended_id else b"z\r")
+        self._rx.append(frame)
