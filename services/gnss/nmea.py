@@ -21,6 +21,7 @@ import re
 
 import msgspec
 import pynmeagps
+from pynmeagps.nmeahelpers import calc_checksum
 from pynmeagps.nmeatypes_get import NMEA_PAYLOADS_GET
 
 from common.messages.gnss import FixType as FixQuality
@@ -86,15 +87,7 @@ Sentence = Gga | Rmc | Gst
 # Minimum field counts (after the address field). RMC grew a mode field in NMEA 2.3
 # and a nav-status field in 4.10; accept the 2.x form too.
 _MIN_FIELDS = {"GGA": 14, "RMC": 11, "GST": 8}
-_MAX_LEN = 200  # NMEA says 82; high-precision receivers exceed it, garbage exceeds this.
-
-
-def checksum(body: str) -> str:
-    """The two hex digits of the XOR of every character between ``$`` and ``*``."""
-    c = 0
-    for ch in body.encode("ascii"):
-        c ^= ch
-    return f"{c:02X}"
+MAX_LEN = 200  # NMEA says 82; high-precision receivers exceed it, garbage exceeds this.
 
 
 def parse_sentence(line: bytes | str) -> Sentence | None:
@@ -113,7 +106,7 @@ def parse_sentence(line: bytes | str) -> Sentence | None:
     fields = body.split(",")
     addr = fields[0]
     kind = addr[2:] if len(addr) == 5 and addr.isalnum() else addr
-    want = checksum(body)
+    want = calc_checksum(body)
     if given != want:
         raise NmeaError(f"{kind}: bad checksum *{given}, computed *{want}")
     if addr.startswith("P") or kind not in _MIN_FIELDS:
@@ -149,7 +142,7 @@ def _as_text(line: bytes | str) -> str:
     text = line.strip()
     if not text:
         raise NmeaError("empty NMEA sentence")
-    if len(text) > _MAX_LEN:
+    if len(text) > MAX_LEN:
         raise NmeaError(f"NMEA sentence too long ({len(text)} chars): {_clip(text)}")
     return text
 
@@ -269,57 +262,3 @@ def _gst(talker: str, msg: pynmeagps.NMEAMessage) -> Gst:
         std_lon_m=_opt_float(msg.stdLong),
         std_alt_m=_opt_float(msg.stdAlt),
     )
-
-
-# --- byte streams ---
-
-
-class LineSplitter:
-    """Cuts a serial/TCP byte stream into candidate sentences (``$...`` without CR/LF).
-
-    Resynchronises on the next ``$`` after garbage, a sentence cut short by another
-    ``$``, or a run longer than ``max_len`` bytes; ``dropped_bytes`` counts what was
-    skipped. It does not validate: pass each line to :func:`parse_sentence`.
-    """
-
-    def __init__(self, max_len: int = _MAX_LEN) -> None:
-        self._buf = bytearray()
-        self._max_len = max_len
-        self.dropped_bytes = 0
-
-    def _drop(self, n: int) -> None:
-        # Line terminators between sentences are not garbage.
-        chunk = self._buf[:n]
-        self.dropped_bytes += n - chunk.count(b"\r") - chunk.count(b"\n")
-        del self._buf[:n]
-
-    def feed(self, data: bytes) -> list[bytes]:
-        """Append ``data``; return the complete lines it finished, in order."""
-        self._buf += data
-        out: list[bytes] = []
-        while True:
-            start = self._buf.find(b"$")
-            if start < 0:
-                self._drop(len(self._buf))
-                return out
-            if start:
-                self._drop(start)
-            end = _find_eol(self._buf)
-            restart = self._buf.find(b"$", 1, len(self._buf) if end < 0 else end)
-            if restart > 0:  # a new sentence began before this one ended
-                self._drop(restart)
-                continue
-            if end < 0:
-                if len(self._buf) > self._max_len:
-                    self._drop(len(self._buf))
-                return out
-            if end > self._max_len:
-                self._drop(end)
-                continue
-            out.append(bytes(self._buf[:end]))
-            del self._buf[: end + 1]
-
-
-def _find_eol(buf: bytearray) -> int:
-    cr, lf = buf.find(b"\r"), buf.find(b"\n")
-    return lf if cr < 0 else cr if lf < 0 else min(cr, lf)

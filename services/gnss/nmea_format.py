@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 
 import msgspec
+from pynmeagps.nmeahelpers import calc_checksum
 
-from services.gnss.nmea import KNOT_MPS, Gga, Gst, Rmc, checksum
+from services.gnss.nmea import KNOT_MPS, Gga, Gst, Rmc
 
 
 class Vtg(msgspec.Struct, frozen=True, kw_only=True):
@@ -27,7 +28,7 @@ class Vtg(msgspec.Struct, frozen=True, kw_only=True):
 
 def _sentence(addr: str, fields: list[str]) -> str:
     body = ",".join([addr, *fields])
-    return f"${body}*{checksum(body)}\r\n"
+    return f"${body}*{calc_checksum(body)}\r\n"
 
 
 def _fmt_time(t: float | None) -> str:

@@ -13,7 +13,8 @@ from common.messages.gnss import NavSatFix
 from common.service import Context
 from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
-from services.gnss.nmea import Gga, Gst, LineSplitter, NmeaError, parse_sentence
+from services.gnss.nmea import Gga, Gst, NmeaError, parse_sentence
+from services.gnss.nmea_stream import LineSplitter
 from services.gnss.pairing import EpochPairer
 from services.gnss.receiver import Receiver, open_receiver
 from services.gnss.solution import FixBuilder, heading

@@ -8,18 +8,11 @@ import datetime as dt
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from pynmeagps.nmeahelpers import calc_checksum as checksum
 
-from services.gnss.nmea import (
-    FixQuality,
-    Gga,
-    Gst,
-    LineSplitter,
-    NmeaError,
-    Rmc,
-    checksum,
-    parse_sentence,
-)
+from services.gnss.nmea import FixQuality, Gga, Gst, NmeaError, Rmc, parse_sentence
 from services.gnss.nmea_format import format_gga, format_gst, format_rmc
+from services.gnss.nmea_stream import LineSplitter
 
 # Published examples (NovAtel GPGGA/GPGST docs, the classic NMEA RMC/GGA examples).
 NOVATEL_GGA = (
