@@ -93,16 +93,7 @@ def serve(launch: Launch[C], build: Callable[[Context, C], Service], lockstep: L
     """Open the Zenoh session, build the service and run it until a signal stops it;
     its exit status."""
     name, manifest = launch.name, launch.manifest
-    stop = threading.Event()
-
-    def on_signal(signum: int, _frame: object) -> None:
-        log.info("%s: received %s, stopping", name, signal.Signals(signum).name)
-        if not stop.is_set():
-            faulthandler.dump_traceback_later(STOP_DEADLINE_S, exit=True)
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
+    stop = _stop_on_signals(name)
     zenoh.init_log_from_env_or("error")
     try:
         session = zenoh.open(zenoh_config("peer", launch.listen, launch.connect))
@@ -167,6 +158,22 @@ def serve(launch: Launch[C], build: Callable[[Context, C], Service], lockstep: L
         session.close()
     log.info("%s: stopped", name)
     return code
+
+
+def _stop_on_signals(name: str) -> threading.Event:
+    """An event SIGTERM and SIGINT set; a service still running ``STOP_DEADLINE_S``
+    after the first writes every thread's stack and exits."""
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: object) -> None:
+        log.info("%s: received %s, stopping", name, signal.Signals(signum).name)
+        if not stop.is_set():
+            faulthandler.dump_traceback_later(STOP_DEADLINE_S, exit=True)
+        stop.set()
+
+    signal.signal(signal.SIGTERM, on_signal)
+    signal.signal(signal.SIGINT, on_signal)
+    return stop
 
 
 def _heartbeat(bus: Bus, name: str, machine: str, since_ns: int, stop: threading.Event) -> None:

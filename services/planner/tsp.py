@@ -218,7 +218,7 @@ def one_tree_bound(d: F64, upper: float, iterations: int = 1000) -> float:
 
 
 @nb.njit(cache=True)
-def _held_karp_bound(w0: F64, upper: float, iterations: int) -> float:  # pragma: no cover
+def _held_karp_bound(w0: F64, upper: float, iterations: int) -> float:  # pragma: no cover  # noqa: C901
     n = w0.shape[0]
     pi = np.zeros(n)
     best, lam, since = -np.inf, 2.0, 0

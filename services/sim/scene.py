@@ -169,7 +169,7 @@ def _voxels(
 
 
 @nb.njit(**_JIT)
-def _first_hit(
+def _first_hit(  # noqa: C901, PLR0915
     o: F64,
     d: F64,
     tmax: float,
