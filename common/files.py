@@ -2,25 +2,56 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 
-def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
-    """``write(tmp)`` then rename onto ``path``, so a reader (or a run interrupted
-    half way) sees the previous file or the new one, never half of one. The temporary
-    sits beside ``path`` (one file system, so the rename is atomic) and keeps its
-    suffix, by which pye57, laspy and matplotlib pick the format."""
+@contextlib.contextmanager
+def atomic_path(path: Path, durable: bool = False) -> Iterator[Path]:
+    """Yield a temporary to write ``path``'s new content to; on a clean exit it is
+    renamed onto ``path``, so a reader (or a run interrupted half way) sees the
+    previous file or the new one, never half of one; on an exception it is removed.
+    The temporary sits beside ``path`` (one file system, so the rename is atomic),
+    hidden, and keeps the suffix by which pye57, laspy and matplotlib pick the
+    format; a leftover (or a planted symlink) there is removed, not written through.
+    ``durable``: the file and its folder are synced to disk, so that a power cut right
+    after keeps the new file (a scanner's card, a simulator's world)."""
     tmp = path.with_name(f".{path.stem}.part{path.suffix}")
+    tmp.unlink(missing_ok=True)
     try:
-        write(tmp)
+        yield tmp
+        if durable:
+            _fsync(tmp)
         os.replace(tmp, path)
+        if durable:
+            _fsync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def atomic_write(path: Path, write: Callable[[Path], object], durable: bool = False) -> None:
+    """``write(tmp)``, then ``tmp`` renamed onto ``path`` (:func:`atomic_path`)."""
+    with atomic_path(path, durable) as tmp:
+        write(tmp)
+
+
+def write_atomic(path: Path, data: bytes, durable: bool = False) -> None:
+    """``data`` written to ``path`` whole or not at all (:func:`atomic_path`)."""
+    with atomic_path(path, durable) as tmp:
+        tmp.write_bytes(data)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def read_regular(path: Path, limit: int, what: str) -> bytes:

@@ -131,9 +131,9 @@ def rot_zyx(roll: float, pitch: float, yaw: float) -> FloatArray:
 
 
 def euler_zyx(r: npt.ArrayLike) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of a rotation matrix, the inverse of :func:`rot_zyx` (pitch
-    within +-pi/2)."""
-    m = np.asarray(r, dtype=np.float64)
+    """(roll, pitch, yaw) of a rotation matrix (or of a 4x4 transform's rotation part),
+    the inverse of :func:`rot_zyx` (pitch within +-pi/2)."""
+    m = np.asarray(r, dtype=np.float64)[:3, :3]
     pitch = -math.asin(min(1.0, max(-1.0, float(m[2, 0]))))
     return (
         math.atan2(float(m[2, 1]), float(m[2, 2])),

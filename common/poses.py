@@ -85,13 +85,6 @@ def tilt_from_axis_inclinations(incl_x: float, incl_y: float) -> tuple[float, fl
     return pitch, math.asin(min(max(s, -1.0), 1.0))
 
 
-def euler_zyx(m: F64) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of the rotation part of ``m`` (inverse of ``rot_zyx``)."""
-    r = m[:3, :3]
-    pitch = -math.asin(min(max(float(r[2, 0]), -1.0), 1.0))
-    return math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])
-
-
 def inv(m: F64) -> F64:
     """Inverse of a rigid 4x4 transform."""
     out = np.eye(4)

@@ -11,6 +11,8 @@ from typing import Any, Literal
 
 import msgspec
 
+from common.files import write_atomic
+
 SCHEMA = "phenorover.bench/1"
 Verdict = Literal["met", "missed", "no target"]
 Op = Literal["<=", ">="]
@@ -103,9 +105,7 @@ def verdict(value: float | None, target: Target | None) -> Verdict:
 def write(res: BenchResult, path: Path) -> None:
     """Write ``res`` to ``path`` atomically (a reader never sees half a file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(msgspec.json.format(msgspec.json.encode(res), indent=1) + b"\n")
-    tmp.replace(path)
+    write_atomic(path, msgspec.json.format(msgspec.json.encode(res), indent=1) + b"\n")
 
 
 def load(path: Path) -> BenchResult:

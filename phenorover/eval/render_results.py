@@ -21,6 +21,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from common.files import write_atomic
 from phenorover.eval import calibration_table
 from phenorover.eval.bench_schema import BenchResult, Figure, ResultError, load
 from phenorover.eval.results import BENCH_DIR, format_value, now, target_text
@@ -206,9 +207,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = args.out.read_text() if args.out.exists() else ""
     text = render(args.bench_dir, args.out.parent, previous)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_name(args.out.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(args.out)
+    write_atomic(args.out, text.encode())
     print(f"wrote {args.out}")
     return 0
 

@@ -12,16 +12,11 @@ import msgspec
 import tomli_w
 
 from common.config import load_manifest
+from common.files import write_atomic
 from common.messages.plan import PlanResult
 from common.robot import RUN_COPY, Robot, dump_robot, robot_path
 
 MANIFEST_COPY = "manifest.toml"
-
-
-def _atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
 
 
 def _no_none(v: Any) -> Any:
@@ -46,7 +41,7 @@ def effective_manifest(manifest: Path, field: str) -> bytes:
 def write_run_files(
     folder: Path, plan: PlanResult, robot: Robot, manifest: Path | None, field: str
 ) -> None:
-    _atomic(folder / "plan.json", msgspec.json.encode(plan))
-    _atomic(folder / RUN_COPY, dump_robot(robot).encode())
+    write_atomic(folder / "plan.json", msgspec.json.encode(plan))
+    write_atomic(folder / RUN_COPY, dump_robot(robot).encode())
     if manifest is not None:
-        _atomic(folder / MANIFEST_COPY, effective_manifest(manifest, field))
+        write_atomic(folder / MANIFEST_COPY, effective_manifest(manifest, field))

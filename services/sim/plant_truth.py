@@ -27,8 +27,8 @@ from common import fieldbook
 from common.arrays import F64
 from common.canopy import CanopyDefinition, plot_traits
 from common.field import Field, FieldLayout
+from common.files import write_atomic
 from services.sim.foliage import Foliage
-from services.sim.storage import write_atomic
 from services.sim.terrain import Terrain
 from services.sim.trial import PlotPlan, TrialPlan
 from services.sim.truth_file import PLANTS_TRUTH, PlantTruth
@@ -146,5 +146,5 @@ def write_plant_truth(folder: Path, world: World) -> Path:
     all; returns its path."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / PLANTS_TRUTH
-    write_atomic(path, msgspec.json.encode(plant_truth_of(world)))
+    write_atomic(path, msgspec.json.encode(plant_truth_of(world)), durable=True)
     return path

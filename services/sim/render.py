@@ -34,8 +34,8 @@ import numpy.typing as npt
 
 from common.arrays import F32, F64, I32, U8
 from common.field import ScannerModel
+from common.files import atomic_path
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
-from services.sim.storage import atomic_path
 
 ARCSEC = math.pi / (180 * 3600)
 
@@ -216,7 +216,7 @@ def write_e57(
     intensity (N,), optional row/column indices, and ``pose`` (4x4, parent <-
     scanner; None: identity) as the scan's E57 pose, which CloudCompare and SCENE
     apply on import. pye57 stores coordinates as 32-bit floats (~4 um at 70 m).
-    The file appears whole or not at all (written as ``<path>.tmp``, synced, renamed).
+    The file appears whole or not at all (written beside it, synced, renamed).
     Raises ValueError on mismatched shapes."""
     import pye57
 
@@ -234,7 +234,7 @@ def write_e57(
     if row is not None and col is not None:
         data["rowIndex"] = np.asarray(row, dtype=np.uint16)
         data["columnIndex"] = np.asarray(col, dtype=np.uint16)
-    with atomic_path(Path(path)) as tmp:
+    with atomic_path(Path(path), durable=True) as tmp:
         e57 = pye57.E57(str(tmp), mode="w")
         try:
             e57.write_scan_raw(

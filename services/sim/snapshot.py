@@ -32,9 +32,9 @@ import msgspec
 import numpy as np
 
 from common.field import Field, FieldLayout
+from common.files import write_atomic
 from common.robot import Robot, default_robot
 from services.sim.robot import RobotState
-from services.sim.storage import write_atomic
 from services.sim.world import WorldConfig
 
 log = logging.getLogger(__name__)
@@ -146,7 +146,7 @@ def robots(snap: Snapshot) -> list[RobotSnapshot]:
 def save(path: Path, snap: Snapshot) -> None:
     """Write ``snap`` atomically (a crash mid-write keeps the previous one)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, msgspec.json.encode(snap))
+    write_atomic(path, msgspec.json.encode(snap), durable=True)
 
 
 def load(path: Path, world: str, deployment: str | None = None) -> Snapshot | None:

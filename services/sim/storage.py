@@ -6,17 +6,15 @@ its own card). A request is a message from the network, so its path is resolved
 name in it matching :data:`common.messages.core.FileName`'s pattern; anything else is
 refused with a line naming ``RenderRequest.path``.
 
-Files are written as ``<name>.tmp`` in the same folder, flushed to disk and renamed
-over the final name: a crash leaves the old file or none, never a truncated one.
+Files are written beside their final name, flushed to disk and renamed over it
+(:func:`common.files.atomic_path`, durable): a crash leaves the old file or none,
+never a truncated one.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import re
 import typing
-from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
@@ -51,35 +49,3 @@ def confine(path: str, root: Path, suffix: str, field: str) -> Path:
     if bad:
         raise PathRefused(f"{field}: {path!r}: {bad[0]!r} is not an allowed file name")
     return target
-
-
-def _fsync(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-@contextlib.contextmanager
-def atomic_path(path: Path, durable: bool = True) -> Iterator[Path]:
-    """Yield ``<path>.tmp`` to write to; on a clean exit it is fsynced (``durable``)
-    and renamed to ``path`` (the folder synced too), on an exception removed."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.unlink(missing_ok=True)  # a leftover, or a planted symlink, is not written through
-    try:
-        yield tmp
-        if durable:
-            _fsync(tmp)
-        os.replace(tmp, path)
-        if durable:
-            _fsync(path.parent)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def write_atomic(path: Path, data: bytes, durable: bool = True) -> None:
-    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
-    with atomic_path(path, durable) as tmp:
-        tmp.write_bytes(data)

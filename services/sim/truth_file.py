@@ -26,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import CanopyDefinition
+from common.files import write_atomic
 from services.sim.robot import RobotState
-from services.sim.storage import write_atomic
 from services.sim.trial import TrialConfig
 
 PLANTS_TRUTH = "plants.truth.json"
@@ -56,7 +56,7 @@ def truth_path(scan: str | Path) -> Path:
 
 def write_truth(scan: str | Path, truth: ScanTruth) -> None:
     """Write the truth beside ``scan``, whole or not at all (temporary name, renamed)."""
-    write_atomic(truth_path(scan), msgspec.json.encode(truth))
+    write_atomic(truth_path(scan), msgspec.json.encode(truth), durable=True)
 
 
 def scan_truth(stamp_ns: int, pose: npt.NDArray[np.float64], st: RobotState) -> ScanTruth:

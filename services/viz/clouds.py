@@ -91,7 +91,8 @@ def find_registered(folder: Path, globs: list[str]) -> Path | None:
     import time
 
     for g in globs:
-        found = [p for p in folder.glob(g) if p.is_file()]
+        # a hidden name is a file being written (common.files.atomic_path)
+        found = [p for p in folder.glob(g) if p.is_file() and not p.name.startswith(".")]
         if found:
             newest = max(found, key=lambda p: p.stat().st_mtime)
             return newest if time.time() - newest.stat().st_mtime > 1.0 else None

@@ -7,12 +7,11 @@ import pytest
 from scipy.spatial import cKDTree
 
 from common.field import load_field
-from common.geo import rot_zyx
+from common.geo import euler_zyx, rot_zyx
 from common.pointcloud import CloudIOError, PosedScan, read_e57, write_e57, write_laz
 from common.poses import (
     PoseError,
     apply,
-    euler_zyx,
     inv,
     scanner_pose,
     tilt_from_axis_inclinations,

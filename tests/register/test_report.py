@@ -16,8 +16,8 @@ import msgspec
 import numpy as np
 import pytest
 
+from common.geo import euler_zyx
 from common.pointcloud import read_e57
-from common.poses import euler_zyx
 from common.robot import default_robot
 from phenorover.eval.register.truth import read_truth, true_pose
 from services.register.cli import main, run_register

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from common.field import load_field
+from common.files import atomic_path, write_atomic
 from common.pointcloud import read_e57
 from phenorover.eval.register.truth import read_truth
 from services.sim import snapshot
 from services.sim.render import write_e57
 from services.sim.robot import RobotState
-from services.sim.storage import PathRefused, atomic_path, confine, write_atomic
+from services.sim.storage import PathRefused, confine
 from services.sim.truth_file import ScanTruth, write_truth
 from services.sim.world import WorldConfig
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from common.files import finite
+from common.files import finite, write_atomic
 from common.pointcloud import read_e57
 from common.poses import F64, PoseError, check_pose
 from phenorover.eval.register.paper import compare
@@ -199,12 +198,7 @@ def markdown(result: Json, truth: TruthScore | None) -> str:
 
 
 def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.part")
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_atomic(path, text.encode())
 
 
 def evaluate(
