@@ -26,6 +26,7 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from common.arrays import F32
+from common.files import atomic_path
 from common.poses import F64, apply, check_pose
 
 # (x, y, z) field -> (east, north, up) UTM, arrays in and out
@@ -46,10 +47,18 @@ class PosedScan:
     pose: F64
     name: str
 
+    @classmethod
+    def as_scanned(cls, points: npt.ArrayLike, intensity: npt.ArrayLike, name: str) -> PosedScan:
+        """A scan as the scanner writes it to its card: in its own frame, no pose."""
+        pts = np.asarray(points, dtype=np.float64)
+        return cls(pts, np.asarray(intensity, dtype=np.float32), np.eye(4), name)
 
-def write_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
+
+def write_e57(path: str | Path, scans: Sequence[PosedScan], durable: bool = False) -> None:
     """Write all ``scans`` to one E57 file, each with its pose (one data3D entry per
-    scan). Raises CloudIOError naming the scan with bad data."""
+    scan), whole or not at all (:func:`common.files.atomic_path`; ``durable``: synced
+    to disk, as a scanner's card is). pye57 stores coordinates as 32-bit floats (about
+    4 um at 70 m). Raises CloudIOError naming the scan with bad data."""
     import pye57
 
     if not scans:
@@ -63,20 +72,21 @@ def write_e57(path: str | Path, scans: Sequence[PosedScan]) -> None:
         if len(s.points) == 0:
             raise CloudIOError(f"{path}: scan {s.name!r} has no points")
         check_pose(s.pose, f"{path}: scan {s.name!r} pose")
-    e57 = pye57.E57(str(path), mode="w")
-    try:
-        for s in scans:
-            q = Rotation.from_matrix(s.pose[:3, :3]).as_quat()  # x, y, z, w
-            wxyz = np.array([q[3], q[0], q[1], q[2]]) * (1.0 if q[3] >= 0 else -1.0)
-            data = {
-                "cartesianX": np.ascontiguousarray(s.points[:, 0], dtype=np.float64),
-                "cartesianY": np.ascontiguousarray(s.points[:, 1], dtype=np.float64),
-                "cartesianZ": np.ascontiguousarray(s.points[:, 2], dtype=np.float64),
-                "intensity": np.asarray(s.intensity, dtype=np.float64),
-            }
-            e57.write_scan_raw(data, name=s.name, rotation=wxyz, translation=s.pose[:3, 3])
-    finally:
-        e57.close()
+    with atomic_path(Path(path), durable) as tmp:
+        e57 = pye57.E57(str(tmp), mode="w")
+        try:
+            for s in scans:
+                q = Rotation.from_matrix(s.pose[:3, :3]).as_quat()  # x, y, z, w
+                wxyz = np.array([q[3], q[0], q[1], q[2]]) * (1.0 if q[3] >= 0 else -1.0)
+                data = {
+                    "cartesianX": np.ascontiguousarray(s.points[:, 0], dtype=np.float64),
+                    "cartesianY": np.ascontiguousarray(s.points[:, 1], dtype=np.float64),
+                    "cartesianZ": np.ascontiguousarray(s.points[:, 2], dtype=np.float64),
+                    "intensity": np.asarray(s.intensity, dtype=np.float64),
+                }
+                e57.write_scan_raw(data, name=s.name, rotation=wxyz, translation=s.pose[:3, 3])
+        finally:
+            e57.close()
 
 
 def _open_e57(path: str | Path) -> Any:

@@ -76,7 +76,7 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
     out.mkdir(parents=True, exist_ok=True)
     outputs: dict[str, Any] = {}
     t = time.perf_counter()
-    atomic_write(out / "registered.e57", lambda p: write_e57(p, reg.scans))
+    write_e57(out / "registered.e57", reg.scans)
     outputs["e57"] = "registered.e57"
     log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
     counts: dict[str, int] = {}

@@ -25,16 +25,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
 from common.arrays import F32, F64, I32, U8
 from common.field import ScannerModel
-from common.files import atomic_path
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
 
 ARCSEC = math.pi / (180 * 3600)
@@ -181,64 +178,3 @@ def render(
         label=lab.astype(np.uint8),
         shape=(len(el), len(az)),
     )
-
-
-def _quat_wxyz(r: F64) -> F64:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
-    tr = float(np.trace(r))
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k])
-        q = [0.0] * 4
-        q[0] = (r[k, j] - r[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (r[j, i] + r[i, j]) / s
-        q[1 + k] = (r[k, i] + r[i, k]) / s
-    qa = np.array(q)
-    out: F64 = qa / np.linalg.norm(qa) * (1 if qa[0] >= 0 else -1)
-    return out
-
-
-def write_e57(
-    path: str | Path,
-    points: F64,
-    intensity: npt.ArrayLike,
-    pose: F64 | None = None,
-    name: str = "scan",
-    row: npt.ArrayLike | None = None,
-    col: npt.ArrayLike | None = None,
-) -> None:
-    """Write one scan to an E57 file: cartesian points (N, 3) in the scanner frame,
-    intensity (N,), optional row/column indices, and ``pose`` (4x4, parent <-
-    scanner; None: identity) as the scan's E57 pose, which CloudCompare and SCENE
-    apply on import. pye57 stores coordinates as 32-bit floats (~4 um at 70 m).
-    The file appears whole or not at all (written beside it, synced, renamed).
-    Raises ValueError on mismatched shapes."""
-    import pye57
-
-    pts = np.asarray(points, dtype=np.float64)
-    inten = np.asarray(intensity, dtype=np.float64).ravel()
-    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) != len(inten) or len(pts) == 0:
-        raise ValueError(f"points {pts.shape} and intensity {inten.shape} do not match")
-    m = np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
-    data: dict[str, npt.NDArray[np.generic]] = {
-        "cartesianX": pts[:, 0],
-        "cartesianY": pts[:, 1],
-        "cartesianZ": pts[:, 2],
-        "intensity": inten,
-    }
-    if row is not None and col is not None:
-        data["rowIndex"] = np.asarray(row, dtype=np.uint16)
-        data["columnIndex"] = np.asarray(col, dtype=np.uint16)
-    with atomic_path(Path(path), durable=True) as tmp:
-        e57 = pye57.E57(str(tmp), mode="w")
-        try:
-            e57.write_scan_raw(
-                data, name=name, rotation=_quat_wxyz(m[:3, :3]), translation=m[:3, 3]
-            )
-        finally:
-            e57.close()

@@ -27,6 +27,7 @@ from common.clock import NS
 from common.config import ConfigError, load_manifest
 from common.field import load_field
 from common.messages.sim import RenderReply, RenderRequest, SimClock, SimRun
+from common.pointcloud import PosedScan, write_e57
 from common.service import Context
 from common.transport import RequestError
 from services.sim import snapshot
@@ -35,7 +36,6 @@ from services.sim.battery import SimBattery
 from services.sim.config import SimConfig
 from services.sim.faults import FaultSchedule
 from services.sim.plant_truth import write_plant_truth
-from services.sim.render import write_e57
 from services.sim.robot import RobotState
 from services.sim.robots import SEED_STRIDE, SimRobot, starts
 from services.sim.storage import PathRefused, confine
@@ -168,7 +168,8 @@ class SimService:
             pitch = true_pitch + float(rng.normal(0.0, sd))
             roll = true_roll + float(rng.normal(0.0, sd))
             path.parent.mkdir(parents=True, exist_ok=True)
-            write_e57(path, scan.points, scan.intensity, name=path.stem)
+            card = PosedScan.as_scanned(scan.points, scan.intensity, path.stem)
+            write_e57(path, [card], durable=True)
             # evaluation only: lets `phenorover register` score against the truth
             write_truth(path, scan_truth(self.sim_ns, pose, st))
         return RenderReply(

@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from common.field import load_field
 from common.field_geojson import field_frame
 from common.geo import wrap_angle
-from common.pointcloud import read_e57
+from common.pointcloud import PosedScan, read_e57, write_e57
 from common.robot import default_robot
 from phenorover.eval.error_models import compass, faro, rtk
 from phenorover.eval.results import Bench
@@ -34,7 +34,7 @@ from services.gnss.receiver import receiver_output
 from services.gnss.rtk_model import RtkErrorModel, RtkModelConfig
 from services.gnss.solution import FixBuilder, heading
 from services.planner.core import plan
-from services.sim.render import ScanSettings, write_e57
+from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.scene import LABEL_NAMES
 from services.sim.world import World, WorldConfig
@@ -121,7 +121,7 @@ def scan_timing(out: Path) -> dict[str, float]:
         t0 = time.perf_counter()
         scan = world.render_scan(world.scanner_pose(s), settings, rng)
         path = out / f"Scan_{k + 1:05d}.e57"
-        write_e57(path, scan.points, scan.intensity, name=path.stem)
+        write_e57(path, [PosedScan.as_scanned(scan.points, scan.intensity, path.stem)])
         times.append(time.perf_counter() - t0)
         npts.append(len(scan.points))
         for lab, name in enumerate(LABEL_NAMES[1:], start=1):

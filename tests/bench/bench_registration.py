@@ -40,13 +40,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[2] / ".cache/numba"))
 
 from common.field import load_field
+from common.pointcloud import PosedScan, write_e57
 from common.poses import scanner_pose
 from phenorover.eval.register.score import score_registration
 from phenorover.eval.registration import NAV_SIGMA, TARGETS, error_models, record
 from phenorover.eval.results import Bench
 from services.planner.core import plan
 from services.register.pipeline import RegisterConfig, ScanInput, register
-from services.sim.render import ScanSettings, write_e57
+from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.world import World
 
@@ -93,7 +94,7 @@ def survey(
         true = world.scanner_pose(state)
         scan = world.render_scan(true, settings, rng)
         path = tmp / f"scan_{k:02d}.e57"
-        write_e57(path, scan.points, scan.intensity, name=f"scan_{k:02d}")
+        write_e57(path, [PosedScan.as_scanned(scan.points, scan.intensity, f"scan_{k:02d}")])
         s = NAV_SIGMA
         nav = scanner_pose(
             state.x + rng.normal(0, s["xy_m"]),

@@ -16,11 +16,12 @@ import pytest
 
 from common.field import load_field
 from common.geo import rot_zyx
+from common.pointcloud import PosedScan, write_e57
 from common.robot import default_robot
 from services.mission.log import MissionLog
 from services.planner.core import plan
 from services.register.runlog import Placement
-from services.sim.render import ScanSettings, write_e57
+from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.truth_file import ScanTruth, write_truth
 from services.sim.world import World
@@ -60,7 +61,7 @@ def mission_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         true = world.scanner_pose(state)
         scan = world.render_scan(true, ScanSettings(step_deg=0.6), rng)
         path = card / f"Scan_{k + 1:05d}.e57"
-        write_e57(path, scan.points, scan.intensity, name=path.stem)
+        write_e57(path, [PosedScan.as_scanned(scan.points, scan.intensity, path.stem)])
         write_truth(
             path,
             ScanTruth(

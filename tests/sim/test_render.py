@@ -6,7 +6,7 @@ import pytest
 
 from common.field import load_field
 from common.geo import se3
-from common.pointcloud import read_e57
+from common.pointcloud import PosedScan, read_e57, write_e57
 from services.sim.foliage import FoliageConfig, build_foliage
 from services.sim.render import (
     FaroNoise,
@@ -14,7 +14,6 @@ from services.sim.render import (
     range_sigma,
     render,
     scan_grid,
-    write_e57,
 )
 from services.sim.robot import RobotState
 from services.sim.scene import GROUND, LEAF_HIT, POLE, SPHERE, STEM_HIT, Scene
@@ -117,7 +116,7 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
     assert np.abs(d - 0.1).max() < 0.01
 
     path = tmp_path / "scan.e57"
-    write_e57(path, s.points, s.intensity, pose, name="loc74", row=s.row, col=s.col)
+    write_e57(path, [PosedScan(s.points, s.intensity.astype(np.float32), pose, "loc74")])
     pts, inten, pose_back = _read(path)
     np.testing.assert_allclose(pts, s.points, atol=1e-5)
     np.testing.assert_allclose(inten, s.intensity, atol=1e-6)
@@ -126,9 +125,9 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
 
 def test_e57_without_pose_reads_identity(tmp_path):
     pts = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
-    write_e57(tmp_path / "a.e57", pts, [0.1, 0.2])
+    write_e57(tmp_path / "a.e57", [PosedScan.as_scanned(pts, [0.1, 0.2], "a")])
     back, _, pose = _read(tmp_path / "a.e57")
     np.testing.assert_allclose(back, pts, atol=1e-6)
     np.testing.assert_allclose(pose, np.eye(4))
     with pytest.raises(ValueError, match="do not match"):
-        write_e57(tmp_path / "b.e57", pts, [0.1])
+        write_e57(tmp_path / "b.e57", [PosedScan.as_scanned(pts, [0.1], "b")])

@@ -12,10 +12,9 @@ import pytest
 
 from common.field import load_field
 from common.files import atomic_path, write_atomic
-from common.pointcloud import read_e57
+from common.pointcloud import PosedScan, read_e57, write_e57
 from phenorover.eval.register.truth import read_truth
 from services.sim import snapshot
-from services.sim.render import write_e57
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, confine
 from services.sim.truth_file import ScanTruth, write_truth
@@ -76,7 +75,7 @@ def test_atomic_write_replaces_whole_or_not_at_all(tmp_path: Path) -> None:
 def test_scan_and_truth_files_leave_no_temporary_behind(tmp_path: Path) -> None:
     f = tmp_path / "Scan_00001.e57"
     pts = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0]])
-    write_e57(f, pts, [0.1, 0.2])
+    write_e57(f, [PosedScan.as_scanned(pts, [0.1, 0.2], f.stem)], durable=True)
     truth = ScanTruth(
         stamp_ns=1, scanner_pose=np.eye(4).tolist(), x=1, y=2, z=0, roll=0, pitch=0, yaw=0
     )

@@ -19,10 +19,9 @@ from common.messages.gnss import FixType, NavSatFix
 from common.messages.mission import MissionPhase, MissionState
 from common.messages.nav import PoseEstimate
 from common.messages.plan import PlanResult
-from common.pointcloud import PosedScan, write_laz
+from common.pointcloud import PosedScan, write_e57, write_laz
 from common.robot import LidarMount, ScannerMount, default_robot
 from services.planner.core import plan as make_plan
-from services.sim.render import write_e57
 from services.viz import clouds, scene
 from services.viz.cli import VizCli
 from services.viz.config import VizConfig
@@ -141,7 +140,7 @@ def test_mission_log_gets_a_line_only_when_the_state_changes() -> None:
 
 def test_a_scan_is_placed_at_its_navigation_pose(tmp_path: Path) -> None:
     f = tmp_path / "scan.e57"
-    write_e57(f, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), np.ones(2))
+    write_e57(f, [PosedScan.as_scanned([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.ones(2), "s")])
     pose = PoseEstimate(x=2.0, y=3.0, yaw=math.pi / 2, z=0.1)
     pts = clouds.scan_in_field(f, pose, pitch=0.0, roll=0.0, mount=UP_1M, n=10)
     assert pts == pytest.approx(np.array([[2.0, 3.0, 1.1], [2.0, 4.0, 1.1]]), abs=1e-5)
