@@ -3,6 +3,7 @@ first reply to a call. :class:`common.transport.Bus` serves and calls with them.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Iterable
 from contextlib import AbstractContextManager, nullcontext
 from typing import Any, TypeVar
@@ -27,6 +28,20 @@ class RpcTimeout(RpcError):
 
 class RequestError(ValueError):
     """Raised by an RPC handler to answer with an error reply instead of a result."""
+
+
+def until_served(call: Callable[[], R], within_s: float, retry_s: float = 0.5) -> R:
+    """``call()``, made again while nobody answers it (RpcTimeout: a service that is
+    alive but has not declared its queryable yet, or one restarting) for up to
+    ``within_s`` seconds, ``retry_s`` apart; an error reply is raised at once."""
+    deadline = time.monotonic() + within_s
+    while True:
+        try:
+            return call()
+        except RpcTimeout:
+            if time.monotonic() + retry_s > deadline:
+                raise
+            time.sleep(retry_s)
 
 
 def answer(

@@ -257,13 +257,10 @@ def _survey(
 def _start(bus: Bus, name: str, plan: PlanResult) -> MissionState:
     """Start robot ``name``'s mission, asking again while its queryable is not yet
     reachable."""
-    from common.rpc import RpcError
+    from common.rpc import RpcError, until_served
 
     cmd = MissionStart(mission=f"fleet-{name}", plan=plan)
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            return bus.call(keys.MISSION_CMD.within(name), cmd, timeout=60)
-        except RpcError as exc:
-            if "no reply" not in str(exc) or time.monotonic() > deadline:
-                raise RuntimeError(f"{name}: mission did not start: {exc}") from None
+    try:
+        return until_served(lambda: bus.call(keys.MISSION_CMD.within(name), cmd, timeout=60), 60.0)
+    except RpcError as exc:
+        raise RuntimeError(f"{name}: mission did not start: {exc}") from None

@@ -26,6 +26,7 @@ from common.messages.mission import (
     MissionStatusQuery,
 )
 from common.messages.plan import read_plan
+from common.rpc import until_served
 from common.transport import Bus, RpcError
 
 
@@ -119,13 +120,7 @@ def add_command(p: argparse.ArgumentParser) -> None:
 def _call(bus: Bus, cmd: MissionCommand) -> MissionState:
     """One mission command; a service that is alive but not serving yet (no reply)
     is asked again for up to 30 s."""
-    deadline = time.monotonic() + 30
-    while True:
-        try:
-            return bus.call(keys.MISSION_CMD, cmd, timeout=330)
-        except RpcError as exc:
-            if "no reply" not in str(exc) or time.monotonic() > deadline:
-                raise
+    return until_served(lambda: bus.call(keys.MISSION_CMD, cmd, timeout=330), 30.0)
 
 
 def run_survey(
