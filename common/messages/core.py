@@ -57,6 +57,16 @@ _WIRE_DTYPES = frozenset(
 )
 
 
+# The frames messages are stamped in (REP-103/105 names; ``field`` is the survey's own
+# frame, :mod:`common.field`): one spelling for every publisher
+FIELD_FRAME = "field"
+ODOM_FRAME = "odom"
+BASE_FRAME = "base_link"
+IMU_FRAME = "imu_link"
+LASER_FRAME = "laser"
+SCANNER_FRAME = "scanner"
+
+
 class Message(msgspec.Struct, frozen=True, kw_only=True):
     """Base of all bus messages: a time stamp and the frame the data is expressed in."""
 

@@ -2,6 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.messages.core import BASE_FRAME
 from common.ros2.types import CmdVelType
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
 
@@ -53,7 +54,7 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     turn_slip_sd: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.1
     ros2_cmd_vel: Topic = "cmd_vel"
     ros2_cmd_vel_type: CmdVelType = "Twist"
-    ros2_cmd_vel_frame: str = "base_link"
+    ros2_cmd_vel_frame: str = BASE_FRAME
     ros2_odom: Topic = "odom"
     ros2_scan: Topic = "scan"
     ros2_imu: Topic = "imu/data"

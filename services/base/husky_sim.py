@@ -38,6 +38,7 @@ import numpy as np
 
 from common import keys
 from common.messages.base import BatteryState, Imu, LaserScan
+from common.messages.core import BASE_FRAME, ODOM_FRAME
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
@@ -91,8 +92,8 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     scan: Topic = "scan"
     imu: Topic = "imu/data"
     battery: Topic = "battery_state"
-    odom_frame: str = "odom"
-    base_frame: str = "base_link"
+    odom_frame: str = ODOM_FRAME
+    base_frame: str = BASE_FRAME
     pose_covariance: Cov6 = HUSKY_COVARIANCE
     twist_covariance: Cov6 = HUSKY_COVARIANCE
     yaw_var: Annotated[float, msgspec.Meta(ge=0)] = IMU_YAW_VAR

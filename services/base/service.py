@@ -8,6 +8,7 @@ import threading
 from common import clock as clk
 from common import keys
 from common.messages.base import BaseStatus, EStop, LaserScan, Odometry, Twist
+from common.messages.core import ODOM_FRAME
 from common.service import Context
 from common.status import parse_token
 from services.base.backends import BACKENDS, Sinks
@@ -96,7 +97,7 @@ class BaseService:
         self.odom_pub.put(
             Odometry(
                 stamp_ns=stamp_ns,
-                frame_id="odom",
+                frame_id=ODOM_FRAME,
                 x=x,
                 y=y,
                 yaw=yaw,

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from common.geo import FieldFrame
+from common.messages.core import FIELD_FRAME
 from common.messages.gnss import FixType, GnssHeading, NavSatFix
 from services.gnss.compass import Compass, CompassError, compass_heading
 from services.gnss.nmea import Gga, Gst
@@ -94,11 +95,16 @@ def heading(f1: NavSatFix, f2: NavSatFix, frame: FieldFrame, compass: Compass) -
     except CompassError:
         yaw = math.atan2(p2[1] - p1[1], p2[0] - p1[0])
         return GnssHeading(
-            stamp_ns=stamp, frame_id="field", yaw=yaw, yaw_sd=math.pi, baseline_m=base, valid=False
+            stamp_ns=stamp,
+            frame_id=FIELD_FRAME,
+            yaw=yaw,
+            yaw_sd=math.pi,
+            baseline_m=base,
+            valid=False,
         )
     return GnssHeading(
         stamp_ns=stamp,
-        frame_id="field",
+        frame_id=FIELD_FRAME,
         yaw=h.yaw_rad,
         yaw_sd=h.yaw_std_rad if both_fixed else math.pi,
         baseline_m=h.baseline_m,

@@ -14,6 +14,7 @@ from common import keys
 from common.field_geojson import load_georeferenced
 from common.geo import rot_zyx
 from common.messages.base import Imu, LaserScan, Odometry, Twist
+from common.messages.core import BASE_FRAME, FIELD_FRAME
 from common.messages.gnss import GnssHeading, NavSatFix
 from common.messages.nav import (
     LEASE_ENDED,
@@ -189,10 +190,10 @@ class NavService:
             hits = hits_on_leg(
                 ranges, m.angle_min, m.angle_increment, lidar, pose, ends, front, *box, self.crop
             )
-            where = "field"
+            where = FIELD_FRAME
         else:
             hits = hits_ahead(ranges, m.angle_min, m.angle_increment, lidar, front, *box)
-            where = "base_link"
+            where = BASE_FRAME
         said = self.obstacles.update(m.stamp_ns / 1e9, hits, where)
         if said and leg is not None:  # standing between routes, nothing waits on it
             at = f"; robot at ({pose[0]:.2f}, {pose[1]:.2f}, {math.degrees(pose[2]):.1f} deg)"
@@ -221,7 +222,7 @@ class NavService:
                     stopped = True
         if stopped:  # now, not at the next tick: a tick is up to 5 cm at 1 m/s
             now = self.ctx.clock.now_ns()
-            self.cmd_pub.put(Twist(stamp_ns=now, frame_id="base_link", linear_x=0.0, angular_z=0.0))
+            self.cmd_pub.put(Twist(stamp_ns=now, frame_id=BASE_FRAME, linear_x=0.0, angular_z=0.0))
 
     def _localized(self, t: float) -> bool:
         """Localized: the filter's uncertainty is within bounds *and* a fix was fused
@@ -251,12 +252,12 @@ class NavService:
                 # gone) is never followed by this tick's older command
                 if active or was_active:
                     self.cmd_pub.put(
-                        Twist(stamp_ns=now, frame_id="base_link", linear_x=cmd.v, angular_z=cmd.w)
+                        Twist(stamp_ns=now, frame_id=BASE_FRAME, linear_x=cmd.v, angular_z=cmd.w)
                     )
             self.pose_pub.put(
                 PoseEstimate(
                     stamp_ns=now,
-                    frame_id="field",
+                    frame_id=FIELD_FRAME,
                     x=x[0],
                     y=x[1],
                     yaw=x[2],
@@ -275,7 +276,7 @@ class NavService:
                 self.progress_pub.put(
                     NavProgress(
                         stamp_ns=now,
-                        frame_id="field",
+                        frame_id=FIELD_FRAME,
                         route_id=route_id,
                         state=cmd.state,
                         leg=cmd.leg,

@@ -8,6 +8,7 @@ import threading
 
 from common import clock as clk
 from common import keys
+from common.messages.core import SCANNER_FRAME
 from common.messages.scan import (
     PauseScan,
     ScannerCommand,
@@ -90,7 +91,7 @@ class ScannerService:
         inc = s.inclinometer
         return ScannerStatus(
             stamp_ns=stamp,
-            frame_id="scanner",
+            frame_id=SCANNER_FRAME,
             state=_STATES[s.state],
             scan_id=sid,
             progress=min(1.0, max(0.0, s.progress_pct / 100.0)),

@@ -12,7 +12,7 @@ import numpy as np
 from common import keys
 from common.clock import NS
 from common.messages.base import LaserScan
-from common.messages.core import Array
+from common.messages.core import BASE_FRAME, FIELD_FRAME, LASER_FRAME, Array
 from common.messages.sim import SimAntennas, SimEncoders, TruthPose
 from common.service import Context
 from services.sim.battery import SimBattery
@@ -76,14 +76,14 @@ class Devices:
         if fx.encoders == "zero":
             ev = ew = 0.0
         if fx.encoders != "silent":
-            self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id="base_link", v=ev, w=ew))
+            self.enc_pub.put(SimEncoders(stamp_ns=t, frame_id=BASE_FRAME, v=ev, w=ew))
         if self._every(self.cfg.gnss_hz, k):
             a = self.world.gnss_truth(s).astype(float)
             blocked = self.world.sky_blocked(a)
             self.ant_pub.put(
                 SimAntennas(
                     stamp_ns=t,
-                    frame_id="field",
+                    frame_id=FIELD_FRAME,
                     p1=(float(a[0, 0]), float(a[0, 1]), float(a[0, 2])),
                     p2=(float(a[1, 0]), float(a[1, 1]), float(a[1, 2])),
                     outage1=fx.outage[0],
@@ -104,7 +104,7 @@ class Devices:
             self.truth_pub.put(
                 TruthPose(
                     stamp_ns=t,
-                    frame_id="field",
+                    frame_id=FIELD_FRAME,
                     x=s.x,
                     y=s.y,
                     z=s.z,
@@ -122,7 +122,7 @@ class Devices:
             self.lidar_pub.put(
                 LaserScan(
                     stamp_ns=t,
-                    frame_id="laser",
+                    frame_id=LASER_FRAME,
                     angle_min=lo,
                     angle_max=hi,
                     angle_increment=inc,

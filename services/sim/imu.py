@@ -31,6 +31,7 @@ import numpy as np
 
 from common.geo import euler_zyx, rot_zyx, wrap_angle
 from common.messages.base import Imu
+from common.messages.core import IMU_FRAME
 from common.robot import ImuMount
 from services.sim.robot import RobotState
 
@@ -89,7 +90,7 @@ class ImuModel:
         g = self.gyro_bias + c.gyro_noise_sd * n[2:5]
         return Imu(
             stamp_ns=round(t * 1e9),
-            frame_id="imu_link",
+            frame_id=IMU_FRAME,
             roll=float(wrap_angle(roll)),
             pitch=float(wrap_angle(pitch)),
             yaw=float(wrap_angle(t_yaw + self.yaw_bias)),
