@@ -3,6 +3,7 @@ line when there is none, and waiting for services' liveliness tokens."""
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import time
@@ -24,6 +25,17 @@ CONNECT_TIMEOUT_S = 3.0
 
 class Unreachable(ConnectionError):
     """No router answered at the endpoints; the message names them, on one line."""
+
+
+def add_connection_arguments(p: argparse.ArgumentParser) -> None:
+    """``--manifest`` and ``--connect``: where a command finds its machine's router
+    (:func:`client_endpoints`)."""
+    p.add_argument(
+        "--manifest", type=Path, default=None, help="deploy manifest (default: deploy/sim.toml)"
+    )
+    p.add_argument(
+        "--connect", action="append", default=[], metavar="ENDPOINT", help="router endpoint"
+    )
 
 
 def client_endpoints(manifest: Path | None, connect: list[str]) -> list[str]:

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from common.client import (
     DEFAULT_MANIFEST,
+    add_connection_arguments,
     connect_or_explain,
     open_client,
     wait_alive,
@@ -238,8 +239,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     s.set_defaults(func=cmd_certs)
 
     s = sub.add_parser("status", help="which services are alive, where, since when")
-    s.add_argument("--manifest", type=Path, default=None)
-    s.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+    add_connection_arguments(s)
     s.add_argument("--timeout", type=float, default=2.0)
     s.set_defaults(func=cmd_status)
 

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from common import keys
+from common.client import add_connection_arguments
 from common.config import ConfigError, load_manifest
 from common.keys import NAMESPACE_RE
 from common.messages.mission import (
@@ -44,8 +45,7 @@ def add_mission_arguments(p: argparse.ArgumentParser) -> None:
         help="the robot to command, by its namespace (default: the manifest's)",
     )
     p.add_argument("--name", default="", help="mission name (default: field and time)")
-    p.add_argument("--manifest", type=Path, default=None)
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+    add_connection_arguments(p)
 
 
 def describe(s: MissionState) -> str:

@@ -12,6 +12,7 @@ from typing import TextIO
 
 import msgspec
 
+from common.client import add_connection_arguments
 from common.cluster import ClusterError, add_cluster_arguments, cluster_of
 from common.config import ConfigError
 from common.field import FieldError
@@ -58,8 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="plan on the crop a survey measured (RUN_DIR/crop.json); compares with nominal",
     )
     add_cluster_arguments(p, "the visibility")
-    p.add_argument("--manifest", type=Path, default=None)
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT")
+    add_connection_arguments(p)
     p.add_argument("--timeout", type=float, default=300.0)
 
 
