@@ -31,10 +31,17 @@ def wrap_angle(a: Any) -> Any:
 
 
 def utm_crs(lat: float, lon: float) -> CRS:
-    """The WGS84 / UTM CRS of the zone containing (lat, lon)."""
+    """The WGS84 / UTM CRS of the zone containing (lat, lon), with the grid's two
+    exceptions (NGA's UTM/MGRS definition): south-west Norway (56-64 deg N, 3-12 deg E)
+    is zone 32, and Svalbard (72-84 deg N) zones 31, 33, 35 and 37 only. pyproj's
+    ``query_utm_crs_info`` knows neither (it answers 31N at 60 deg N 4 deg E)."""
     if not (-80.0 <= lat <= 84.0):
         raise ValueError(f"latitude {lat} is outside the UTM range -80..84 deg")
     zone = int((lon + 180.0) // 6.0) % 60 + 1
+    if 56.0 <= lat < 64.0 and 3.0 <= lon < 12.0:
+        zone = 32
+    elif lat >= 72.0 and 0.0 <= lon < 42.0:
+        zone = 31 if lon < 9.0 else 33 if lon < 21.0 else 35 if lon < 33.0 else 37
     return CRS.from_epsg((32600 if lat >= 0 else 32700) + zone)
 
 

@@ -41,6 +41,19 @@ def test_field_distances_are_metric() -> None:
 def test_utm_zone() -> None:
     assert utm_crs(40.1, -88.2).to_epsg() == 32616
     assert utm_crs(-33.9, 151.2).to_epsg() == 32756
+    # the grid's exceptions: Bergen is in 32V, Svalbard's zones are 31X, 33X, 35X, 37X
+    assert utm_crs(60.39, 5.32).to_epsg() == 32632
+    assert utm_crs(60.39, 2.9).to_epsg() == 32631
+    assert utm_crs(78.22, 15.65).to_epsg() == 32633  # Longyearbyen
+    assert [utm_crs(80.0, lon).to_epsg() - 32600 for lon in (8.9, 9.0, 20.9, 21.0, 33.0, 41.9)] == [
+        31,
+        33,
+        33,
+        35,
+        37,
+        37,
+    ]
+    assert utm_crs(71.9, 10.0).to_epsg() == 32632
 
 
 @given(st.floats(-100, 100))
