@@ -73,11 +73,11 @@ def test_up_restarts_a_killed_service_and_stops_cleanly(procs: Procs, tmp_path: 
         )
     finally:
         session.close()
-    t0 = time.monotonic()
     up.send_signal(signal.SIGTERM)
     assert up.wait(timeout=10) == 0
-    assert time.monotonic() - t0 < 5.0
     text = log.read_text()
+    # every service stopped on its SIGTERM, none waited out and killed
+    assert "did not stop in" not in text and "all services stopped" in text
     assert "service gnss exited with code -9; restarting" in text
     assert not [p for p in all_pids if pid_alive(p)], "a service outlived the launcher"
 

@@ -11,7 +11,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from common.config import zenoh_config
 from common.messages.mission import MissionPhase, MissionStart, MissionState
 from common.messages.nav import NavState
 from common.messages.sim import TruthPose
+from common.rpc import until_served
 from common.transport import Bus, RpcError
 from services.mission.log import MissionLog
 from tests.conftest import REPO, Procs, free_port, record
@@ -117,15 +117,8 @@ return_to_origin = {str(home).lower()}
         self.state = self.bus.latest(keys.MISSION_STATE)
 
     def start(self, **kw: Any) -> MissionState:
-        deadline = time.monotonic() + 60
-        while True:
-            try:
-                return self.bus.call(
-                    keys.MISSION_CMD, MissionStart(field=str(TINY), **kw), timeout=120
-                )
-            except RpcError as exc:
-                if "no reply" not in str(exc) or time.monotonic() > deadline:
-                    raise
+        cmd = MissionStart(field=str(TINY), **kw)
+        return until_served(lambda: self.bus.call(keys.MISSION_CMD, cmd, timeout=120), 60.0)
 
     def wait(self, pred: object, timeout: float = 240) -> MissionState:
         s = self.state.wait_for(pred, timeout=timeout)  # type: ignore[arg-type]

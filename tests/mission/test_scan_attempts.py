@@ -202,5 +202,5 @@ def test_a_peer_that_hangs_mid_scan_is_noticed_by_the_age_of_what_it_said(
     assert got == why, events
     # the scan is 60 s long: lost after its deadline (1 s) and the stop call to a
     # scanner that may not answer (rpc_timeout_s, 1 s), not at its end
-    assert time.monotonic() - t0 < 30.0
+    assert time.monotonic() - t0 < 45.0  # a fail-safe: the scan's end would be 60 s
     assert step.status == "driving", step

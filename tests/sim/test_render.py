@@ -1,4 +1,3 @@
-import time
 from pathlib import Path
 
 import numpy as np
@@ -100,16 +99,13 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
     state = engr.settle(RobotState(x=1.5, y=17.2, yaw=0.0))
     pose = engr.scanner_pose(state)
     engr.render_scan(pose, WINDOW, np.random.default_rng(0))  # compile outside the timing
-    t0 = time.perf_counter()
     s = engr.render_scan(pose, ScanSettings(), np.random.default_rng(3))
-    elapsed = time.perf_counter() - t0
     counts = np.bincount(s.label, minlength=8)
     assert counts[GROUND] > 1000 and counts[LEAF_HIT] > 1000 and counts[STEM_HIT] > 100
     assert counts[SPHERE] > 0 and counts[POLE] > 0
     r = np.linalg.norm(s.points, axis=1)
     assert r.min() >= 0.6 - 0.01 and r.max() <= 70.0
     assert s.shape == (417, 1000) and s.row.max() < 417 and s.col.max() < 1000
-    assert elapsed < 10.0
     # sphere points land on the true spheres once placed with the true pose
     world = s.points[s.label == SPHERE] @ pose[:3, :3].T + pose[:3, 3]
     d = np.linalg.norm(world[:, None, :] - engr.sphere_centres[None], axis=2).min(axis=1)
