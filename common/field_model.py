@@ -14,6 +14,7 @@ import numpy as np
 
 from common.arrays import F64, I64
 from common.files import read_regular
+from common.robot import Robot, default_robot
 
 # Every float finite by schema (NaN and inf fail a two-sided bound): these configs
 # travel nested in plans. Lengths in metres, at most 10 km.
@@ -122,9 +123,6 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
 
 
 def _default_scanner_height() -> float:
-    # imported here: the robot description imports this module for ScannerModel
-    from common.robot import default_robot
-
     return default_robot().scanner.z
 
 
@@ -141,9 +139,15 @@ class ScannerModel(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=45)] = 0.36
     min_range: NonNeg = 0.6
     max_range: Pos = 70.0
-    # the robot description's scanner height (common.robot.scanner_model); by default
+    # the robot description's scanner height (scanner_model); by default
     # the shipped robot's
     height: Pos = msgspec.field(default_factory=_default_scanner_height)
+
+
+def scanner_model(robot: Robot, base: ScannerModel | None = None) -> ScannerModel:
+    """The planner's model of ``robot``'s scanner: ``base`` (default: the FARO Focus
+    S70 as the paper uses it) with its optical centre at the robot's scanner height."""
+    return msgspec.structs.replace(base or ScannerModel(), height=robot.scanner.z)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -25,7 +25,6 @@ import msgspec
 
 from common.battery import Battery
 from common.config import ConfigError, one_line
-from common.field import ScannerModel
 
 ROBOTS_DIR = Path(__file__).with_name("robots")
 DEFAULT = "husky"
@@ -228,9 +227,3 @@ def default_robot() -> Robot:
 def dump_robot(robot: Robot) -> str:
     """``robot`` as TOML that :func:`load_robot` reads back to an equal description."""
     return msgspec.toml.encode(robot).decode()
-
-
-def scanner_model(robot: Robot, base: ScannerModel | None = None) -> ScannerModel:
-    """The planner's model of ``robot``'s scanner: ``base`` (default: the FARO Focus
-    S70 as the paper uses it) with its optical centre at the robot's scanner height."""
-    return msgspec.structs.replace(base or ScannerModel(), height=robot.scanner.z)

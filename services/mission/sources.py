@@ -17,9 +17,9 @@ import numpy as np
 from common import keys
 from common.battery import Pace
 from common.field import FieldError, load_field
+from common.field_model import scanner_model
 from common.messages.mission import MissionStart
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult, read_plan
-from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.log import MissionLog

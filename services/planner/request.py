@@ -16,8 +16,9 @@ from common.field import (
     field_path,
     load_field,
 )
+from common.field_model import scanner_model
 from common.messages.plan import PlanOptions, PlanRequest, PlanResult
-from common.robot import Robot, scanner_model
+from common.robot import Robot
 from services.planner.budget import PlanBudget, check
 from services.planner.core import plan
 from services.planner.visibility import Chunks, Progress

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from common import keys
 from common.field import FIELDS_DIR, FieldError, field_path
+from common.field_model import scanner_model
 from common.messages.plan import PlanRequest, PlanResult
-from common.robot import scanner_model
 from common.service import Context
 from common.transport import RequestError
 from services.planner.budget import check

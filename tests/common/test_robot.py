@@ -12,6 +12,7 @@ import pytest
 
 from common.config import ConfigError, decode_section, load_manifest
 from common.field import Field, FieldLayout, load_field
+from common.field_model import scanner_model
 from common.messages.base import LaserScan
 from common.messages.core import Array
 from common.missionlog import Step
@@ -22,7 +23,6 @@ from common.robot import (
     dump_robot,
     load_robot,
     robot_path,
-    scanner_model,
 )
 from common.service import main
 from services.base.config import BaseConfig
