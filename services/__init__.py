@@ -16,16 +16,16 @@ SERVICES: dict[str, str] = {
     # device simulators for hardware-in-the-loop runs (deploy/hil.toml): each speaks its
     # device's own protocol on its own wire, so the hardware backends of gnss, base and
     # scanner drive the simulated robot unchanged
-    "reach-sim": "services.gnss.reach_sim_config:ReachSimConfig",
-    "husky-sim": "services.base.husky_sim:HuskySimConfig",
+    "reach-sim": "services.gnss.sim.config:ReachSimConfig",
+    "husky-sim": "services.base.sim.husky:HuskySimConfig",
     "faro-sim": "services.scanner.config:FaroSimConfig",
 }
 
 # where a service's process lives when it is not ``services.<name>``
 MODULES: dict[str, str] = {
-    "reach-sim": "services.gnss.reach_sim",
-    "husky-sim": "services.base.husky_sim",
-    "faro-sim": "services.scanner.faro_sim",
+    "reach-sim": "services.gnss.sim.reach",
+    "husky-sim": "services.base.sim.husky",
+    "faro-sim": "services.scanner.sim.faro",
 }
 
 

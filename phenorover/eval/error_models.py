@@ -12,8 +12,8 @@ from common.config import decode_section, load_manifest
 from common.robot import Robot, load_robot
 from services.gnss.compass import Compass
 from services.gnss.config import GnssConfig
-from services.gnss.reach_sim_config import ReachSimConfig
 from services.gnss.rtk_model import STATES, RtkModelConfig, StateNoise
+from services.gnss.sim.config import ReachSimConfig
 from services.sim.config import SimConfig
 from services.sim.imu import ImuConfig
 from services.sim.lidar import LidarConfig

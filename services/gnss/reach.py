@@ -2,7 +2,7 @@
 
 One code path for every simulated receiver: the ``sim`` backend
 (:class:`services.gnss.receiver.SimReceiver`, over Zenoh) and the wire simulator
-(:mod:`services.gnss.reach_sim`, over TCP and a serial pseudo-terminal) both call
+(:mod:`services.gnss.sim.reach`, over TCP and a serial pseudo-terminal) both call
 :meth:`ReachM2.epoch`.
 
 What a Reach M2 sends per epoch on its NMEA position output, as this module writes it:

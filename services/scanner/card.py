@@ -3,7 +3,7 @@
 
 One implementation for both emulated scanners: the in-process one of the ``sim``
 backend (:class:`services.scanner.device.SimDevice`) and the one across a serial CAN
-link (:mod:`services.scanner.faro_sim`).
+link (:mod:`services.scanner.sim.faro`).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from common import keys
 from common.messages.sim import RenderRequest
 from common.service import Context
 from services.scanner.can_codec import ScanProfile
-from services.scanner.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
+from services.scanner.sim.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 # a scan can take minutes to render at fine steps on a small machine
 RENDER_TIMEOUT_S = 300.0

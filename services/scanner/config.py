@@ -2,7 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from services.scanner.emulator import FaroFaults
+from services.scanner.sim.emulator import FaroFaults
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
 
@@ -38,7 +38,7 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
 
 class FaroSimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The FARO emulator behind an SLCAN serial link (``python -m
-    services.scanner.faro_sim``, ``[services.faro-sim]``): it makes a pseudo-terminal
+    services.scanner.sim.faro``, ``[services.faro-sim]``): it makes a pseudo-terminal
     and the symlink ``link`` to it, which the scanner service opens with
     ``backend = "can"``, ``interface = "slcan"``, ``channel = <link>``. Completed scans
     are rendered by the simulator into ``storage_dir`` (the scanner's card: give the

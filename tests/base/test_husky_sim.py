@@ -24,7 +24,7 @@ from common.ros2 import msgs as ros
 from common.ros2.node import Ros2Node
 from common.ros2.types import IMU, ODOMETRY, TWIST
 from common.transport import Bus
-from services.base.husky_sim import HUSKY_COVARIANCE, IMU_YAW_VAR
+from services.base.sim.husky import HUSKY_COVARIANCE, IMU_YAW_VAR
 from tests.conftest import Procs, Record, record
 
 
@@ -36,7 +36,7 @@ def test_base_drives_the_simulated_husky(
     imus = record(client_bus, keys.BASE_IMU)
     wheels = record(client_bus, keys.SIM_WHEELS)
     health = record(client_bus, keys.HEALTH.at(service="base"))
-    husky = procs.service("services.base.husky_sim", router_endpoint, log=tmp_path / "husky.log")
+    husky = procs.service("services.base.sim.husky", router_endpoint, log=tmp_path / "husky.log")
     base = procs.service(
         "services.base", router_endpoint, "--set", "backend=ros2", log=tmp_path / "base.log"
     )

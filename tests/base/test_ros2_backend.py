@@ -17,8 +17,8 @@ from common.ros2.types import twist_of
 from common.transport import Bus
 from services.base.backends import OdomWatch, Ros2Base, Sinks
 from services.base.config import BaseConfig
-from services.base.husky_sim import HuskySimConfig, command_age_s
 from services.base.ros2_convert import battery_from_ros, decode_odometry, imu_from_ros
+from services.base.sim.husky import HuskySimConfig, command_age_s
 from tests.conftest import Record
 
 MS = 1_000_000

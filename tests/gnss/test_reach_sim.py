@@ -17,9 +17,9 @@ from common.messages.sim import SimAntennas
 from common.service import Context
 from common.transport import Bus
 from services.gnss.config import AntennaConfig, GnssConfig
-from services.gnss.reach_sim import ReachSim
-from services.gnss.reach_sim_config import ReachFaults, ReachOutput, ReachSimConfig
 from services.gnss.receiver import SimReceiver
+from services.gnss.sim.config import ReachFaults, ReachOutput, ReachSimConfig
+from services.gnss.sim.reach import ReachSim
 
 
 class FakeBus:

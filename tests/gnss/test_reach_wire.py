@@ -15,8 +15,8 @@ import pytest
 from common.geo import FieldFrame
 from common.transport import Bus
 from services.gnss.config import AntennaConfig, GnssConfig
-from services.gnss.reach_wire import PtyLine, TcpFanout
 from services.gnss.receiver import SerialNmea, TcpNmea
+from services.gnss.sim.wire import PtyLine, TcpFanout
 
 FRAME = FieldFrame(33.717028, -83.308083, 200.0, 90.0)
 LINE = b"$GNVTG,,T,,M,0.0000,N,0.0000,K,R*2E\r\n"

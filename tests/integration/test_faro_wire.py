@@ -1,6 +1,6 @@
 """The scanner service's hardware backend (``backend = "can"``, ``interface =
 "slcan"``, python-can) against the FARO emulator in another process, behind an SLCAN
-link over a pseudo-terminal (``services.scanner.faro_sim``); the test plays the
+link over a pseudo-terminal (``services.scanner.sim.faro``); the test plays the
 simulator's renderer."""
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def start(
     args += ["--set", f"scan_time_s={scan_s}"]
     for f in faults:
         args += ["--set", f"faults.{f}"]
-    procs.service("services.scanner.faro_sim", ep, *args, log=tmp / "faro-sim.log")
+    procs.service("services.scanner.sim.faro", ep, *args, log=tmp / "faro-sim.log")
     assert wait_alive(bus.session, {"faro-sim"}, timeout=20)  # up: the link is there
     assert link.is_symlink()
     sets = {"backend": "can", "interface": "slcan", "channel": f"'{link}'"}

@@ -1,4 +1,4 @@
-"""Simulated Reach M2 receivers on real wires (``services.gnss.reach_sim``): the TCP
+"""Simulated Reach M2 receivers on real wires (``services.gnss.sim.reach``): the TCP
 byte stream checked by pynmeagps, and the gnss service's hardware backends
 (``nmea-tcp``, ``nmea-serial``) reading it through a dropped link and line noise."""
 
@@ -64,7 +64,7 @@ def reach_sim(
     procs: Procs, endpoint: str, log: Path, outputs: str, *extra: str
 ) -> subprocess.Popen[bytes]:
     return procs.service(
-        "services.gnss.reach_sim",
+        "services.gnss.sim.reach",
         endpoint,
         *("--field", "engr", "--set", f"outputs={outputs}", *extra),
         log=log,

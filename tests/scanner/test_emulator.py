@@ -19,7 +19,7 @@ import pytest
 from services.scanner.can_codec import ScanProfile, ScanState
 from services.scanner.client import AckTimeout, CommandRejected, ScannerClient, ScannerStatus
 from services.scanner.device import BusOffGate
-from services.scanner.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
+from services.scanner.sim.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 PROFILE = ScanProfile(resolution_index=4, quality=2)
 SCAN_S = 0.3

@@ -22,8 +22,8 @@ from hypothesis import strategies as st
 
 from services.scanner.can_codec import ScanProfile, ScanState
 from services.scanner.client import AckTimeout, ScannerClient
-from services.scanner.emulator import FaroEmulator, FaroFaults
-from services.scanner.slcan_device import BUS_OFF_FLAGS, SlcanDevice
+from services.scanner.sim.emulator import FaroEmulator, FaroFaults
+from services.scanner.sim.slcan_device import BUS_OFF_FLAGS, SlcanDevice
 from services.scanner.slcan_host import SlcanHost
 from tests.scanner.test_emulator import FakeClock, until
 
@@ -131,7 +131,7 @@ def test_bad_bytes_are_refused_counted_and_logged_never_raised(
             b"Q",
             b"x" * 40,
         ]
-        with caplog.at_level(logging.WARNING, logger="services.scanner.slcan_device"):
+        with caplog.at_level(logging.WARNING, logger="services.scanner.sim.slcan_device"):
             os.write(host_fd, b"\r".join(garbage) + b"\rt1001AB\r")
             msg = recv_on(device)  # the good frame after the garbage still arrives
         assert msg.arbitration_id == 0x100 and msg.data == b"\xab"

@@ -1,7 +1,7 @@
 """A simulated Husky ROS 2 driver over rmw_zenoh: the ``ros2`` backend of the base
 service drives it as it drives the real Husky, and it drives the simulator's base.
 
-``python -m services.base.husky_sim --manifest M`` (config ``[services.husky-sim]``).
+``python -m services.base.sim.husky --manifest M`` (config ``[services.husky-sim]``).
 As a ROS 2 node (``husky_node`` by default) on the Zenoh network it
 
 - subscribes ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped as Clearpath's Jazzy

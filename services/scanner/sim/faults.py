@@ -30,7 +30,7 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
       (the scan itself goes on), and the client's sends fail with
       ``can.CanOperationError``, as python-can reports a bus with no one to
       acknowledge (see :class:`services.scanner.device.BusOffGate`; across an SLCAN
-      link, :mod:`services.scanner.slcan_device` reports it as an adapter does);
+      link, :mod:`services.scanner.sim.slcan_device` reports it as an adapter does);
       once only.
 
     Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;

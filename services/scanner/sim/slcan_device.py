@@ -40,7 +40,7 @@ from pathlib import Path
 
 import can
 
-from services.scanner.slcan_text import frame_line, is_hex, parse_frame
+from services.scanner.sim.slcan_text import frame_line, is_hex, parse_frame
 
 log = logging.getLogger(__name__)
 

@@ -1,13 +1,13 @@
 """The simulated FARO behind a serial CAN adapter, as its own process.
 
-``python -m services.scanner.faro_sim --manifest M`` (``[services.faro-sim]``, see
+``python -m services.scanner.sim.faro --manifest M`` (``[services.faro-sim]``, see
 :class:`~services.scanner.config.FaroSimConfig`) runs the FARO emulator on the
 adapter's end of an SLCAN link over a pseudo-terminal, and links ``link`` to the
 terminal. The scanner service then drives it with its hardware backend, unchanged:
 ``backend = "can"``, ``interface = "slcan"``, ``channel = <link>``, through
 python-can as it drives a CANable on a serial port. Faults are the emulator's
-(:class:`~services.scanner.emulator.FaroFaults`); bus-off shows on the wire as an
-adapter reports it (see :mod:`services.scanner.slcan_device`). Completed scans are
+(:class:`~services.scanner.sim.emulator.FaroFaults`); bus-off shows on the wire as an
+adapter reports it (see :mod:`services.scanner.sim.slcan_device`). Completed scans are
 rendered by the simulator (``rpc/sim/render``) into ``storage_dir``, as with the
 ``sim`` backend, in the folder of the mission under way (``mission/state``): the
 scanner service reports ``<storage_dir>/<project>/Scan_NNNNN.e57`` for the project
@@ -25,7 +25,7 @@ from common.messages.mission import MissionState
 from common.service import Context, run
 from services.scanner.card import RenderedCard, emulate
 from services.scanner.config import FaroSimConfig
-from services.scanner.slcan_device import SlcanDevice
+from services.scanner.sim.slcan_device import SlcanDevice
 
 
 class FaroSim:

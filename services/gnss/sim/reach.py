@@ -1,5 +1,5 @@
 """Two simulated Emlid Reach M2 receivers on their real wires, for hardware-in-the-
-loop runs: ``python -m services.gnss.reach_sim --manifest M`` (``[services.reach-sim]``).
+loop runs: ``python -m services.gnss.sim.reach --manifest M`` (``[services.reach-sim]``).
 
 It follows the simulator's antenna truth (``sim/device/antennas``) and sends what a
 Reach M2 sends on its NMEA position output (:class:`services.gnss.reach.ReachM2`, the
@@ -26,8 +26,8 @@ from common.field_geojson import load_frame
 from common.messages.sim import SimAntennas
 from common.service import Context, run
 from services.gnss.reach import ReachM2
-from services.gnss.reach_sim_config import ReachSimConfig
-from services.gnss.reach_wire import PtyLine, TcpFanout
+from services.gnss.sim.config import ReachSimConfig
+from services.gnss.sim.wire import PtyLine, TcpFanout
 
 
 class _Schedule:

@@ -42,7 +42,7 @@ from services.scanner.can_codec import (
     Status,
     default_codec,
 )
-from services.scanner.faro_faults import FaroFaults, FaultBook, aimed
+from services.scanner.sim.faults import FaroFaults, FaultBook, aimed
 
 __all__ = ["STORAGE_ERROR_CODE", "FaroEmulator", "FaroFaults", "default_scan_duration_s"]
 
