@@ -8,7 +8,6 @@ busy with it would refuse the next.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from common import keys
 from common.clock import NS
@@ -16,16 +15,14 @@ from common.messages.nav import PoseEstimate
 from common.messages.scan import ScannerState, ScannerStatus, ScanProfile, StartScan, StopScan
 from common.missionlog import Step
 from common.transport import RpcError
+from services.mission.port import SurveyPort
 from services.mission.stats import pose_stats, scan_pose, tilt_stats
-
-if TYPE_CHECKING:
-    from services.mission.survey import Survey
 
 
 class Scans:
     """The scans of one survey ``sv``, on its clock, calls and pose collection."""
 
-    def __init__(self, sv: Survey) -> None:
+    def __init__(self, sv: SurveyPort) -> None:
         self.sv = sv
 
     def found_on_scanner(self, step: Step) -> bool:

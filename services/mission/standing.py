@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from common.clock import NS
 from common.messages.nav import PoseEstimate
-
-if TYPE_CHECKING:
-    from services.mission.survey import Survey
+from services.mission.port import SurveyPort
 
 
-def settle(sv: Survey) -> PoseEstimate | None:
+def settle(sv: SurveyPort) -> PoseEstimate | None:
     """Wait until the robot has been localized throughout the last ``settle_s``
     and its mean speed and turn rate over them are below the still thresholds
     (the mean, not every sample: the estimate's turn rate carries the encoders'
