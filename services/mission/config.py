@@ -17,9 +17,10 @@ class LanesConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """Lane reservations with the robots sharing the field (:mod:`services.mission.lanes`):
     ``peers`` their namespaces (none: this robot surveys alone, and reserves nothing).
     ``margin_m``: how far beyond its body's reach a robot may stray from its route (the
-    tracking error and the estimate's), reserved with it. A peer is asked every
-    ``retry_s`` (the mission's clock) while the answer is to wait, and one silent for
-    ``answer_timeout_s`` (wall) has not answered."""
+    tracking error and the estimate's), reserved with it; with the body's reach it must
+    stay under the parking distance (:data:`common.lanes.PARK_M`). A peer is asked
+    every ``retry_s`` (the mission's clock; twice that after backing off) while the
+    answer is to wait, and one silent for ``answer_timeout_s`` (wall) has not answered."""
 
     peers: list[Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]] = msgspec.field(
         default_factory=list

@@ -29,8 +29,8 @@ import numpy as np
 from common import keys
 from common.config import ConfigError
 from common.field import load_field
-from common.files import atomic_write
-from common.lanes import LaneMap, driven_rows, footprint_radius, plan_lanes
+from common.files import write_atomic
+from common.lanes import PARK_M, LaneMap, driven_rows, footprint_radius, plan_lanes
 from common.messages.mission import LaneClaims, LaneQuery
 from common.messages.nav import Leg
 from common.messages.plan import PlanResult
@@ -58,12 +58,19 @@ class Lanes:
                 "[services.mission.lanes] peers: a robot sharing a field needs a namespace "
                 "(the manifest's namespace) to be told apart by"
             )
+        if self.me in cfg.peers:  # it would answer itself that it wants its own way
+            raise ConfigError(f"[services.mission.lanes] peers: {self.me!r} is this robot")
         _, self.field = load_field(ctx.field)
         # the lanes an ``aha`` survey drives until a mission's plan says (use())
         n = len(self.field.row_lanes_y)
         self.map = LaneMap(self.field, driven_rows("aha", n))
         fp = ctx.robot.footprint
         self.reach = footprint_radius(fp.length, fp.width) + cfg.margin_m
+        if self.reach >= PARK_M:  # at home, it would stand in the edge lane's segments
+            raise ConfigError(
+                f"[services.mission.lanes] margin_m: {cfg.margin_m:g} m; the robot's reach "
+                f"({self.reach:.2f} m) must stay under its parking distance of {PARK_M:g} m"
+            )
         self.path = Path(ctx.run_dir) / f"lanes-{self.me}.json"
         self._lock = threading.Lock()
         self.claims = self._load()
@@ -79,7 +86,7 @@ class Lanes:
             # what this robot held is unknown: holding every segment keeps the others
             # out until its first route's reservation says where it is
             self.ctx.log.warning("%s: unreadable (%s): holding every lane segment", self.path, exc)
-            return Claims(held=set(self.map.ids))
+            return Claims(held=set(LaneMap(self.field).ids))  # every lane, whatever the plan
         if saved.held or saved.wanted:
             self.ctx.log.info(
                 "lane reservations carried on from %s: holding %s",
@@ -89,8 +96,8 @@ class Lanes:
         return Claims(held=set(saved.held), wanted=set(saved.wanted))
 
     def _save(self) -> None:
-        data = msgspec.json.encode(self.claims.answer(self.me))
-        atomic_write(self.path, lambda p: p.write_bytes(data))
+        # durable: after a power cut the robot still holds the lanes it stands in
+        write_atomic(self.path, msgspec.json.encode(self.claims.answer(self.me)), durable=True)
 
     def _answer(self, q: LaneQuery) -> LaneClaims:
         with self._lock:
@@ -124,36 +131,39 @@ class Lanes:
         row), having forgotten what it wanted."""
         want = self.map.along(legs, self.reach)
         said, stuck = "", 0
-        while True:
-            with self._lock:
-                self.claims.wanted = want - self.claims.held
-                if not self.claims.wanted:
+        try:
+            while True:
+                with self._lock:
+                    self.claims.wanted = want - self.claims.held
+                    if not self.claims.wanted:
+                        break
+                    self._save()  # wanted, and visible, before anyone is asked
+                answers = {p: self._ask(p) for p in self.cfg.peers}
+                verdict = decide(self.me, want, answers)
+                if verdict.granted:
+                    with self._lock:
+                        self.claims.grant()
+                        self._save()  # held, on disk, before the robot moves into it
                     break
-                self._save()  # wanted, and visible, before anyone is asked
-            answers = {p: self._ask(p) for p in self.cfg.peers}
-            verdict = decide(self.me, want, answers)
-            if verdict.granted:
+                if verdict.why != said:
+                    say(f"lanes: waiting, {verdict.why}")
+                    said = verdict.why
                 with self._lock:
-                    self.claims.grant()
-                    self._save()  # held, on disk, before the robot moves into it
-                break
-            if verdict.why != said:
-                say(f"lanes: waiting, {verdict.why}")
-                said = verdict.why
-            with self._lock:
-                held = set(self.claims.held)
-                self.claims.waiting = {s for a in answers.values() if a for s in a.held} & want
-                if verdict.back_off:
-                    self.claims.wanted = set()
-                self._save()
-            peer = deadlocked(self.me, held, want, answers)
-            stuck = stuck + 1 if peer else 0
-            if give_way and stuck >= 2:
-                with self._lock:
-                    self.claims.waiting = set()
+                    held = set(self.claims.held)
+                    self.claims.waiting = {s for a in answers.values() if a for s in a.held} & want
+                    if verdict.back_off:
+                        self.claims.wanted = set()
                     self._save()
-                raise GiveWay(f"{peer} waits for where this robot stands and holds its way")
-            wait(2 * self.cfg.retry_s if verdict.back_off else self.cfg.retry_s)
+                peer = deadlocked(self.me, held, want, answers)
+                stuck = stuck + 1 if peer else 0
+                if give_way and stuck >= 2:
+                    raise GiveWay(f"{peer} waits for where this robot stands and holds its way")
+                wait(2 * self.cfg.retry_s if verdict.back_off else self.cfg.retry_s)
+        except BaseException:  # given up (an abort, or giving way): wanting nothing
+            with self._lock:
+                self.claims.wanted, self.claims.waiting = set(), set()
+                self._save()
+            raise
         if said:
             say("lanes: reserved, driving on")
 

@@ -69,6 +69,8 @@ def walk(
             # whatever the scanner holds for it is not taken after another restart
             log.update(step.idx, status="driving")
         seg = by_cand[step.cand_id]
+        # a drive to a battery swap has nowhere else to go: it never gives way
+        sv.give_way = False
         if battery is not None and log.steps()[step.idx].status in ("pending", "driving"):
             seg = battery.before(step, seg)
         # another robot and this one wait for each other: this one goes elsewhere
@@ -118,6 +120,7 @@ def return_home(host: Host, sv: Survey, segs: list[Segment]) -> None:
         return
     host.phase, host.detail, host.current = MissionPhase.RETURNING, "to Origin", 0
     sv.detail = host.detail
+    sv.give_way = False  # the way home has nowhere else to go
     ok, why = sv.drive(home[0], f"{sv.mission}.home")
     if not ok:
         host.event("error", f"return to the Origin: {why}")
