@@ -39,6 +39,7 @@ from common import keys
 from common.client import open_client, wait_alive
 from common.config import load_manifest
 from common.field import load_field
+from common.files import write_atomic
 from common.messages.mission import MissionStart, MissionState
 from common.messages.plan import PlanOptions, PlanResult
 from common.messages.sim import TruthPose
@@ -127,7 +128,7 @@ def write_deployment(
     paths = {}
     for name, doc in docs.items():
         paths[name] = out / f"{name}.toml"
-        paths[name].write_bytes(msgspec.toml.encode(doc))
+        write_atomic(paths[name], msgspec.toml.encode(doc))
     return paths.pop("world"), paths, relay
 
 
@@ -157,7 +158,8 @@ def run(
 ) -> Outcome:
     """One survey of ``field`` by ``robots`` robots (see the module docstring); the
     plan made with ``options`` for that many robots. Raises RuntimeError, one line,
-    when the deployment does not come up or a mission cannot start."""
+    when the deployment does not come up, a mission cannot start, or one has not ended
+    within ``timeout_s``."""
     from services.planner.core import plan as make_plan
 
     layout, fld = load_field(field)
@@ -247,11 +249,17 @@ def _survey(
             say(outcome.notes[-1])
             healed_at = None
         finals = {n: s.get() for n, s in states.items()}
-        if all(
-            s is not None and not s.in_progress and s.phase.value != "idle" for s in finals.values()
-        ):
+        if all(_ended(s) for s in finals.values()):
             break
     outcome.final = {n: s.get() for n, s in states.items()}
+    late = {n: (s.phase.value if s else "no state") for n, s in outcome.final.items()}
+    late = {n: phase for n, phase in late.items() if not _ended(outcome.final[n])}
+    if late:  # an unfinished survey has no field time to score
+        raise RuntimeError(f"not ended after {timeout_s:g} s of wall time: {late}")
+
+
+def _ended(s: MissionState | None) -> bool:
+    return s is not None and not s.in_progress and s.phase.value != "idle"
 
 
 def _start(bus: Bus, name: str, plan: PlanResult) -> MissionState:

@@ -31,7 +31,8 @@ class Score:
 
 def score(outcome: Outcome, field: Path, robot: str = "") -> Score:
     """The outcome against the truth and the mission logs (see the module docstring);
-    ``robot``: the robot description (its footprint)."""
+    ``robot``: the robot description (its footprint). ValueError, one line, for a
+    robot whose mission log has no end."""
     _, fld = load_field(field)
     fp = load_robot(robot).footprint
     reach = footprint_radius(fp.length, fp.width)
@@ -48,7 +49,9 @@ def score(outcome: Outcome, field: Path, robot: str = "") -> Score:
             for t, _lvl, text in log.events
             if text.startswith("mission ") and text.endswith(" done")
         ]
-        done.append(max(ends) if ends else max(t for t, _l, _x in log.events))
+        if not ends:  # a survey that did not end has no field time
+            raise ValueError(f"{name}: no 'mission ... done' in {run_dir / 'mission.db'}")
+        done.append(max(ends))
         ids = [s.cand_id for s in log.steps if s.status == "done"]
         scanned.update(ids)
         per_robot[name] = len(ids)
