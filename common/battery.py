@@ -105,8 +105,8 @@ def must_swap(
 @dataclasses.dataclass(frozen=True)
 class Visit:
     """One location of a tour: ``to_m`` the drive to it from the previous one (or from
-    the Origin, first), ``from_origin_m`` and ``home_m`` its drives from and to the
-    Origin (m)."""
+    where the tour starts, first), ``from_origin_m`` and ``home_m`` its drives from and
+    to the Origin, where batteries are swapped (m)."""
 
     to_m: float
     from_origin_m: float
@@ -114,8 +114,8 @@ class Visit:
 
 
 class Estimate(msgspec.Struct, frozen=True, kw_only=True):
-    """A survey's time and energy, the swaps included: ``time_s`` from leaving the
-    Origin to being back; ``swaps_before``: the tour positions (0-based) of the
+    """A survey's time and energy, the swaps included: ``time_s`` from leaving where
+    the tour starts (the Origin, or a fleet robot's home) to being back; ``swaps_before``: the tour positions (0-based) of the
     locations a swap comes before; ``drive_m``: metres driven, detours for the swaps
     included; ``energy_wh``: drawn in all; ``feasible``: every location fits in one
     full battery (else the survey would run below its reserve)."""
@@ -133,8 +133,9 @@ class Estimate(msgspec.Struct, frozen=True, kw_only=True):
 
 
 def estimate(visits: Sequence[Visit], end_m: float, battery: Battery, pace: Pace) -> Estimate:
-    """The survey of ``visits`` in order, then ``end_m`` back to the Origin, starting
-    with a full battery and swapping where the mission would (:func:`must_swap`)."""
+    """The survey of ``visits`` in order, then ``end_m`` back to where the legs end,
+    starting with a full battery where they start (the Origin, or a fleet robot's home)
+    and swapping, at the Origin, where the mission would (:func:`must_swap`)."""
     full = battery.capacity_wh
     charge, time_s, drive_m, energy = full, 0.0, 0.0, 0.0
     swaps: list[int] = []
@@ -151,9 +152,7 @@ def estimate(visits: Sequence[Visit], end_m: float, battery: Battery, pace: Pace
         time_s += pace.drive_s(metres) + standing_s
 
     for k, v in enumerate(visits):
-        # the first leg leaves from where the legs start (the Origin, or a fleet
-        # robot's home); after a swap the robot leaves from the Origin
-        to_m = v.from_origin_m if at_origin and k > 0 else v.to_m
+        to_m = v.to_m  # from the previous location, or where the legs start (below: a swap)
         if must_swap(charge, battery, pace, to_m, pace.location_s, v.home_m):
             if not at_origin:
                 spend(home_m, 0.0)

@@ -130,9 +130,11 @@ class FleetPart(msgspec.Struct, frozen=True, kw_only=True):
 
 class Fleet(msgspec.Struct, frozen=True, kw_only=True):
     """The locations split between robots so that the slowest finishes first:
-    ``parts`` one per robot; ``one_robot_s``: the survey's time with one robot (the
-    plan's own tour, the same pace and battery), to compare; ``status`` of the split
-    (``heuristic``: guided local search to its time limit); ``time_s`` it took."""
+    ``parts`` one per robot; ``one_robot_s``: the survey's time with one robot at the
+    same pace and battery, parked as these are (the plan's own tour from the Origin,
+    or with ``home`` ``near`` one robot's parked by the locations), to compare;
+    ``status`` of the split (``heuristic``: guided local search to its time limit);
+    ``time_s`` it took."""
 
     parts: list[FleetPart]
     one_robot_s: NonNegative

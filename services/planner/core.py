@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import time
 
+import msgspec
 import numpy as np
 import numpy.typing as npt
 import scipy.sparse as sp
@@ -84,10 +85,9 @@ def plan(
     nav = Navigator(fld, opt.nav, opt.open_rows, opt.open_cross)
     timings["field"] = time.perf_counter() - t
 
-    every, vsum = _visibility(fld, scanner, opt, progress, chunks, targets)
+    # the cover, and every count of cells, only over the target cells (mat)
+    every, mat, vsum = _visibility(fld, scanner, opt, progress, chunks, targets)
     timings["visibility"] = vsum.time_s
-    # the cover, and every count of cells, only over the target cells
-    mat = every if targets is None else every[:, np.flatnonzero(targets)]
     seen = np.asarray(mat.sum(axis=1)).ravel()
 
     t = time.perf_counter()
@@ -109,7 +109,12 @@ def plan(
     shares = None
     if opt.robots > 1 or opt.home == "near":
         t = time.perf_counter()
-        shares = fleet(nav, pts, ids, via, battery, opt, survey.time_s)
+        # the lone robot a split is weighed against starts where its robots do
+        alone = survey.time_s
+        if opt.home == "near":
+            one = msgspec.structs.replace(opt, robots=1)
+            alone = fleet(nav, pts, ids, via, battery, one, alone).makespan_s
+        shares = fleet(nav, pts, ids, via, battery, opt, alone)
         timings["fleet"] = time.perf_counter() - t
     return PlanResult(
         field=fld.name,
@@ -154,9 +159,9 @@ def _visibility(
     progress: Progress | None,
     chunks: Chunks | None,
     targets: npt.NDArray[np.bool_] | None,
-) -> tuple[sp.csr_matrix, VisibilitySummary]:
-    """Which cells each candidate sees (over every cell), and its summary counted over
-    the ``targets``."""
+) -> tuple[sp.csr_matrix, sp.csr_matrix, VisibilitySummary]:
+    """Which cells each candidate sees: over every cell, over the ``targets`` (every
+    cell when None), and the summary counted over the targets."""
     t = time.perf_counter()
     vis = compute_visibility(
         fld, scanner, opt.visibility, samples=opt.samples, step_deg=opt.grid_step_deg,
@@ -167,13 +172,17 @@ def _visibility(
     mat = every if targets is None else every[:, np.flatnonzero(targets)]
     views = np.asarray(mat.sum(axis=0)).ravel()
     near = vis.cell_min_range()
-    return every, VisibilitySummary(
-        mode=vis.mode,
-        rays=vis.rays,
-        pairs=int(mat.nnz),
-        cells_seen_by_none=int((views == 0).sum()),
-        median_nearest_range=float(np.median(near[np.isfinite(near)])) if mat.nnz else 0.0,
-        time_s=elapsed,
+    return (
+        every,
+        mat,
+        VisibilitySummary(
+            mode=vis.mode,
+            rays=vis.rays,
+            pairs=int(mat.nnz),
+            cells_seen_by_none=int((views == 0).sum()),
+            median_nearest_range=float(np.median(near[np.isfinite(near)])) if mat.nnz else 0.0,
+            time_s=elapsed,
+        ),
     )
 
 

@@ -40,9 +40,10 @@ SPAN_WEIGHT = 100
 
 @dataclasses.dataclass(frozen=True)
 class Split:
-    """``orders[r]``: robot r's tour as node indices (0, the Origin, first);
+    """``orders[r]``: robot r's tour as node indices, its depot first;
     ``times_s[r]``: its time at ``pace``; ``status``: ``heuristic`` (guided local
-    search to its time limit) or ``trivial``."""
+    search to its time limit), ``trivial``, or one robot's tour's own
+    (:func:`services.planner.tsp.solve_tour`)."""
 
     orders: list[list[int]]
     times_s: list[float]
@@ -55,7 +56,7 @@ class Split:
 
 
 def tour_time(d: F64, order: list[int], pace: Pace) -> float:
-    """The closed tour ``order`` (from node 0 and back) at ``pace``."""
+    """The closed tour ``order`` (from its first node and back) at ``pace``."""
     stops = [*order, order[0]]
     metres = sum(float(d[a, b]) for a, b in itertools.pairwise(stops))
     return pace.drive_s(metres) + pace.location_s * (len(order) - 1)
