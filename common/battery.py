@@ -115,10 +115,11 @@ class Visit:
 
 class Estimate(msgspec.Struct, frozen=True, kw_only=True):
     """A survey's time and energy, the swaps included: ``time_s`` from leaving where
-    the tour starts (the Origin, or a fleet robot's home) to being back; ``swaps_before``: the tour positions (0-based) of the
-    locations a swap comes before; ``drive_m``: metres driven, detours for the swaps
-    included; ``energy_wh``: drawn in all; ``feasible``: every location fits in one
-    full battery (else the survey would run below its reserve)."""
+    the tour starts (the Origin, or a fleet robot's home) to being back;
+    ``swaps_before``: the tour positions (0-based) of the locations a swap comes
+    before; ``drive_m``: metres driven, detours for the swaps included; ``energy_wh``:
+    drawn in all; ``feasible``: every location fits in one full battery (else the
+    survey would run below its reserve)."""
 
     time_s: NonNegative
     drive_m: NonNegative
