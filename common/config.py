@@ -18,6 +18,8 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 import zenoh
 
+from common.messages.core import Namespace
+
 C = TypeVar("C")
 
 
@@ -94,7 +96,7 @@ class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     machine: str
     field: str = ""
     robot: str = ""
-    namespace: Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{0,32}$")] = ""
+    namespace: Namespace = ""
     clock: Literal["wall", "sim"] = "wall"
     # with the sim clock: the world waits for the services each step
     # (common/lockstep.py), up to ``lockstep_deadline_s`` of wall time for a hung one

@@ -21,6 +21,7 @@ import re
 from typing import Any, Generic, TypeVar
 
 from common.messages import base, gnss, mission, nav, plan, scan, sim, system
+from common.messages.core import NAMESPACE_PATTERN
 
 PREFIX = "phenorover"
 
@@ -185,8 +186,7 @@ SITE: tuple[str, ...] = (
     FLEET_LANES.key,
 )
 _SITE_RE = re.compile("|".join(re.sub(r"\\\{[^}]*\\\}", "[^/]+", re.escape(k)) for k in SITE))
-# a namespace is one chunk of a key: no slash, no wildcard, nothing Zenoh reserves
-NAMESPACE_RE = re.compile(r"^[A-Za-z0-9_-]{0,32}$")
+NAMESPACE_RE = re.compile(NAMESPACE_PATTERN)  # common.messages.core.Namespace
 
 
 def in_namespace(key: str, namespace: str) -> str:

@@ -57,6 +57,13 @@ _WIRE_DTYPES = frozenset(
 )
 
 
+# A robot's namespace (common.keys.in_namespace): one chunk of a key, no slash, no
+# wildcard, nothing Zenoh reserves; "" is none (a robot surveying alone)
+NAMESPACE_PATTERN = r"^[A-Za-z0-9_-]{0,32}$"
+Namespace = Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)]
+# a robot named among others: a namespace that is not empty
+RobotName = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]
+
 # The frames messages are stamped in (REP-103/105 names; ``field`` is the survey's own
 # frame, :mod:`common.field`): one spelling for every publisher
 FIELD_FRAME = "field"

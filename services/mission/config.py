@@ -3,6 +3,7 @@ from typing import Annotated, Literal
 import msgspec
 
 from common.battery import Pace
+from common.messages.core import RobotName
 from common.messages.scan import ScanProfile
 
 Pos = Annotated[float, msgspec.Meta(gt=0)]
@@ -22,9 +23,7 @@ class LanesConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     every ``retry_s`` (the mission's clock; twice that after backing off) while the
     answer is to wait, and one silent for ``answer_timeout_s`` (wall) has not answered."""
 
-    peers: list[Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]] = msgspec.field(
-        default_factory=list
-    )
+    peers: list[RobotName] = msgspec.field(default_factory=list)
     margin_m: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.3
     retry_s: Pos = 1.0
     answer_timeout_s: Pos = 2.0

@@ -7,6 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError, load_manifest
+from common.messages.core import RobotName
 from services.sim.faults import Fault
 from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
@@ -20,7 +21,7 @@ class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     (its manifest's) and its ``start`` pose (x, y in m, yaw in deg; empty: its home
     beside the field, facing the field)."""
 
-    namespace: Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]
+    namespace: RobotName
     start: tuple[float, float, float] | None = None
 
 

@@ -3,6 +3,7 @@ from typing import Annotated
 import msgspec
 
 from common.canopy import TRAITS
+from common.messages.core import RobotName
 
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 PosInt = Annotated[int, msgspec.Meta(gt=0)]
@@ -31,9 +32,7 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     ``fleet/<namespace>/`` (:mod:`services.viz.fleet_view`).
     """
 
-    robots: list[Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,32}$")]] = msgspec.field(
-        default_factory=list
-    )
+    robots: list[RobotName] = msgspec.field(default_factory=list)
     serve: bool = False
     bind: str = "0.0.0.0"
     grpc_port: Port = 9876
