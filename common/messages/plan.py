@@ -14,6 +14,7 @@ import numpy.typing as npt
 
 from common.battery import Battery, Estimate, Pace
 from common.field import FieldLayout, ScannerModel
+from common.files import read_regular
 from common.messages.core import Array, Coordinate, Finite, Message, NonNegative, Positive
 from common.messages.nav import Leg, legs_length
 
@@ -237,13 +238,22 @@ class PlanRequest(Message, frozen=True, kw_only=True):
     battery: Battery = msgspec.field(default_factory=Battery)
 
 
+# a 100 x 100-plot field's plan is tens of megabytes; a file far beyond is not one
+MAX_PLAN_BYTES = 1 << 30
+
+
 def read_plan(path: Path, what: str) -> PlanResult:
     """The plan in the JSON file ``path`` (``phenorover plan``'s ``plan.json``);
     ValueError, one line beginning with ``what`` (how the caller names the file):
-    unreadable, or not a plan."""
+    unreadable, not a regular file (a FIFO would never end), larger than any plan, or
+    not a plan."""
     try:
-        return msgspec.json.decode(path.read_bytes(), type=PlanResult)
+        data = read_regular(path, MAX_PLAN_BYTES, "a plan")
     except OSError as exc:
         raise ValueError(f"{what}: {exc.strerror}") from None
+    except ValueError as exc:
+        raise ValueError(f"{what}: {exc}") from None
+    try:
+        return msgspec.json.decode(data, type=PlanResult)
     except msgspec.DecodeError as exc:
         raise ValueError(f"{what}: not a plan ({exc})") from None
