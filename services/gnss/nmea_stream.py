@@ -10,7 +10,7 @@ class LineSplitter:
 
     Resynchronises on the next ``$`` after garbage, a sentence cut short by another
     ``$``, or a run longer than ``max_len`` bytes; ``dropped_bytes`` counts what was
-    skipped. It does not validate: pass each line to :func:`parse_sentence`.
+    skipped. It does not validate: pass each line to :func:`.nmea.parse_sentence`.
     """
 
     def __init__(self, max_len: int = MAX_LEN) -> None:

@@ -72,8 +72,9 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     reports.
 
     ``share``: this robot's share (1..N) of a plan split between N robots
-    (``phenorover plan --robots N``); 0, alone, surveys the whole plan, and a split
-    plan is refused. ``lanes``: the reservations with the robots sharing the field.
+    (``phenorover plan --robots N``); 0, alone, surveys the whole plan (the one share
+    of a plan for one robot, ``--home near``), and a plan split between several is
+    refused. ``lanes``: the reservations with the robots sharing the field.
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)

@@ -113,8 +113,8 @@ def visit(
 
 
 def return_home(host: Host, sv: Survey, segs: list[Segment]) -> None:
-    """Drive the plan's last segment, back to the Origin; a failure is reported, not
-    raised: the scans are taken."""
+    """Drive the plan's last segment, back to where the tour began (the Origin, or a
+    fleet robot's home); a failure is reported, not raised: the scans are taken."""
     home = [s for s in segs if s.cand_id is None]
     if not home:
         return

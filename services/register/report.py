@@ -1,7 +1,7 @@
 """The survey report: the paper's tables from a stored mission log and a registration.
 
 :func:`build_report` takes only what is stored (the mission log read by
-:mod:`.runlog`) and the registration's report (:class:`.pipeline.RegistrationReport`),
+:mod:`.runlog`) and the registration's report (:class:`.outcome.RegistrationReport`),
 so a report can be remade from a run folder without running the mission again.
 :func:`.report_md.markdown` renders it as ``report.md``; ``report.json`` is the same dict.
 

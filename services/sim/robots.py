@@ -2,10 +2,11 @@
 devices, on its own namespace's keys (:mod:`common.keys`).
 
 One robot (the default) has the plain keys, starts at ``start`` or the field's
-Origin and draws its noise from the world's seed, as the simulator always did. With
+Origin and draws its noise from the world's seed. With
 ``[[services.sim.robots]]`` several robots share the world, robot k (from 1) with
 the keys of its ``namespace``, starting at its ``start`` or else at its home beside
-the field (:func:`common.lanes.homes`, where a fleet plan has it park), its noise
+the field by the Origin's corner (:func:`common.lanes.homes`, where a plan with
+``home`` ``origin`` has it park; a plan's ``near`` homes are given as ``start``), its noise
 from its own seed. Each robot's lidar sees the others as boxes of their footprint."""
 
 from __future__ import annotations

@@ -15,7 +15,8 @@ others' clocks stand still until the simulator catches up with them. Limitation:
 simulator SIGTERMed alone inside a running deployment starts afresh too, and the
 others' clocks then wait for it as long as the world had run.
 
-File: ``<run_dir>/sim/world.json``, written atomically (see :mod:`services.sim.storage`).
+File: ``<run_dir>/sim/world.json``, written atomically and durably
+(:func:`common.files.write_atomic`).
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 namespaces, :mod:`common.keys`) under ``fleet/<namespace>/``: its pose by its own
 estimate and, in simulation, the truth; its share of the survey (the route its
 mission follows, in a colour of its own); its mission's state, scans done and events.
-The field, the candidates and the locations come from the first plan any robot
-publishes. Like the rest of the dashboard it stores the newest message of each
+The field and the candidates come from the first plan any robot publishes, each
+robot's locations from its own. Like the rest of the dashboard it stores the newest message of each
 stream from the bus and draws on the service's tick."""
 
 from __future__ import annotations

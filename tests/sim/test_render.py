@@ -98,7 +98,6 @@ def test_engr_scan_sees_ground_plants_and_spheres(engr, tmp_path):
     # a planned scan location (ENGR candidate 64): the spheres are placed for those
     state = engr.settle(RobotState(x=1.5, y=17.2, yaw=0.0))
     pose = engr.scanner_pose(state)
-    engr.render_scan(pose, WINDOW, np.random.default_rng(0))  # compile outside the timing
     s = engr.render_scan(pose, ScanSettings(), np.random.default_rng(3))
     counts = np.bincount(s.label, minlength=8)
     assert counts[GROUND] > 1000 and counts[LEAF_HIT] > 1000 and counts[STEM_HIT] > 100

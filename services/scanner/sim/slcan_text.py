@@ -1,5 +1,6 @@
 """A classic CAN frame as an SLCAN line, both ways (Lawicel: ``tiiildd..`` standard,
-``Tiiiiiiiildd..`` extended, ``r``/``R`` remote; ids and data in hex). Pure."""
+``Tiiiiiiiildd..`` extended, ``r``/``R`` remote; ids and data in hex). Pure but for
+the receive time a parsed frame is stamped with."""
 
 from __future__ import annotations
 
