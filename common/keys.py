@@ -48,13 +48,17 @@ class Topic(Generic[M]):
     bulk: bool = False
     control: bool = False
     history: int = 0
+    namespaced: bool = dataclasses.field(default=False, compare=False)
 
     def at(self, **params: Any) -> Topic[M]:
         return dataclasses.replace(self, key=self.key.format(**params))
 
     def within(self, namespace: str) -> Topic[M]:
-        """This topic as the robot in ``namespace`` has it (:func:`in_namespace`)."""
-        return dataclasses.replace(self, key=in_namespace(self.key, namespace))
+        """This topic as the robot in ``namespace`` has it (:func:`in_namespace`); one
+        already in a namespace (another robot's, named by a bus of its own) stays there."""
+        if self.namespaced or not namespace:
+            return self
+        return dataclasses.replace(self, key=in_namespace(self.key, namespace), namespaced=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,13 +68,17 @@ class Rpc(Generic[Q, R]):
     key: str
     request: Any  # a Struct type or a tagged union of them
     reply: type[R]
+    namespaced: bool = dataclasses.field(default=False, compare=False)
 
     def at(self, **params: Any) -> Rpc[Q, R]:
         return dataclasses.replace(self, key=self.key.format(**params))
 
     def within(self, namespace: str) -> Rpc[Q, R]:
-        """This endpoint as the robot in ``namespace`` has it (:func:`in_namespace`)."""
-        return dataclasses.replace(self, key=in_namespace(self.key, namespace))
+        """This endpoint as the robot in ``namespace`` has it (:func:`in_namespace`); one
+        already in a namespace stays there."""
+        if self.namespaced or not namespace:
+            return self
+        return dataclasses.replace(self, key=in_namespace(self.key, namespace), namespaced=True)
 
 
 def _k(path: str) -> str:

@@ -62,11 +62,11 @@ class SimRobot:
         self._cmd: SimWheelCommand | None = None
         self._cmd_ns = -(10**18)
         self.others: list[SimRobot] = []  # the robots its lidar sees
+        self.sim_ns = 0  # before the subscriptions: their callbacks read it
         bus = ctx.bus
         bus.subscribe(keys.SIM_WHEELS.within(namespace), self._on_wheels)
         # the operator who swaps the battery watches the robot's mission
         bus.subscribe(keys.MISSION_STATE.within(namespace), self._on_mission)
-        self.sim_ns = 0
 
     def _on_wheels(self, cmd: SimWheelCommand) -> None:
         with self.lock:

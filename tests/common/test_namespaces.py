@@ -65,3 +65,13 @@ def test_two_robots_on_one_router_hear_only_their_own(router_endpoint: str) -> N
         # the clock went out after r1's command on the same priority: r2 would have
         # heard the command first had it been its key
         assert heard_r2.get() is None
+
+
+def test_a_key_placed_in_a_robots_namespace_stays_there_on_a_namespaced_bus() -> None:
+    """The base station's dashboard names each robot's topics; a bus of its own in a
+    namespace does not put them in a second one."""
+    theirs = keys.NAV_POSE.within("rover2")
+    assert theirs.key == "phenorover/rover2/nav/pose"
+    assert theirs.within("base") == theirs and theirs.within("base").key == theirs.key
+    assert keys.NAV_POSE.within("") is keys.NAV_POSE
+    assert keys.MISSION_CMD.within("r2").within("r3").key == "phenorover/r2/rpc/mission/cmd"
