@@ -14,8 +14,9 @@ from common import keys
 from common.clock import WallClock
 from common.messages.mission import MissionAbort, MissionStart
 from common.messages.plan import PlanResult
+from common.rpc import until_served
 from common.service import Context
-from common.transport import RequestError, RpcTimeout
+from common.transport import RequestError
 from phenorover.cli import main
 from services.mission.config import MissionConfig
 from services.mission.plan import segments
@@ -100,14 +101,10 @@ def test_a_robots_mission_takes_its_share_of_the_plan_sent_over_zenoh(
         ctx = Context("mission", "r2", bus, WallClock(), logging.getLogger("t"), tmp_path, "engr")
         service = MissionService(ctx, MissionConfig(register_on_done=False, share=2))
         cmd = keys.MISSION_CMD.within("r2")
-        state = None
-        for _ in range(100):  # until r2's queryable has reached the router
-            try:
-                state = base.call(cmd, MissionStart(mission="r2-survey", plan=split), timeout=1)
-                break
-            except RpcTimeout:
-                continue
-        assert state is not None and state.mission == "r2-survey"
+        start = MissionStart(mission="r2-survey", plan=split)
+        # until r2's queryable has reached the router
+        state = until_served(lambda: base.call(cmd, start, timeout=1), 30.0)
+        assert state.mission == "r2-survey"
         base.call(cmd, MissionAbort(), timeout=10)
         worker = service._worker
         assert worker is not None

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -46,6 +46,23 @@ def two(router_endpoint: str, tmp_path: Path) -> Iterator[tuple[Bus, Bus]]:
         yield b1, b2
 
 
+class Said(list[str]):
+    """What a reservation said, waited on by the test."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._cv = threading.Condition()
+
+    def append(self, text: str) -> None:
+        with self._cv:
+            super().append(text)
+            self._cv.notify_all()
+
+    def wait_for(self, pred: Callable[[list[str]], bool], timeout: float = 30.0) -> bool:
+        with self._cv:
+            return self._cv.wait_for(lambda: pred(self), timeout)
+
+
 def reserve_in_thread(ln: Lanes, legs: list[Leg], said: list[str]) -> threading.Thread:
     stop = threading.Event()
 
@@ -74,11 +91,10 @@ def test_the_second_robot_waits_for_the_segment_the_first_holds(
     first = reserve_in_thread(l1, [engr_lane(3, 1, 3)], said1)
     first.join(30)
     assert not first.is_alive() and "c3.1" in l1.held(), said1
-    said2: list[str] = []
+    said2 = Said()
     second = reserve_in_thread(l2, [engr_lane(3, 2, 4)], said2)  # shares c3.2
-    second.join(1.0)
+    assert said2.wait_for(lambda s: any("r1 holds" in x and "c3.2" in x for x in s)), said2
     assert second.is_alive() and not l2.held(), "r2 took a segment r1 holds"
-    assert any("r1 holds" in s and "c3.2" in s for s in said2), said2
     l1.release_to(*_far_end(l1))  # r1 drives away: keeps only where it stands
     second.join(30)
     assert not second.is_alive() and "c3.2" in l2.held(), said2
@@ -94,11 +110,10 @@ def _far_end(ln: Lanes) -> tuple[float, float]:
 def test_a_robot_that_cannot_reach_its_peer_waits(two: tuple[Bus, Bus], tmp_path: Path) -> None:
     l1 = lanes(two[0], tmp_path, ["r2", "r9"])  # r9: cut off, or never started
     lanes(two[1], tmp_path, ["r1"])
-    said: list[str] = []
+    said = Said()
     t = reserve_in_thread(l1, [engr_lane(5, 0, 1)], said)
-    t.join(2.0)
+    assert said.wait_for(lambda s: "lanes: waiting, no answer from r9" in s), said
     assert t.is_alive() and not l1.held()
-    assert "lanes: waiting, no answer from r9" in said
     t.stop.set()  # type: ignore[attr-defined]
     t.join(10)
     assert said[-1] == "gave up" and not l1.held()
