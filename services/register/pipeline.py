@@ -204,9 +204,9 @@ def _place(
     t = time.perf_counter()
     found = [detect_spheres(d.points, d.intensity, cfg.spheres, rng) for d in data]
     centres = [np.array([f.fit.centre for f in fs]).reshape(-1, 3) for fs in found]
-    timings["spheres"] = time.perf_counter() - t
-    log.info("spheres per scan: %s", [len(f) for f in found])
     labels = match_targets(centres, nav, cfg.targets.match_radius)
+    timings["spheres"] = time.perf_counter() - t  # found in each scan, and matched
+    log.info("spheres per scan: %s", [len(f) for f in found])
     return _Placed(nav, data, prepared, found, centres, labels)
 
 
