@@ -68,6 +68,8 @@ def tiny() -> tuple[FieldLayout, Field]:
 def test_the_shipped_husky_is_the_default_and_deploy_names_the_same_file() -> None:
     r = load_robot("")
     assert r == default_robot() == load_robot("husky") == load_robot(ROBOTS_DIR / "husky.toml")
+    for m in (REPO / "deploy").glob("*.toml"):  # the shipped manifests: the one file
+        assert robot_path(load_manifest(m).robot) == ROBOTS_DIR / "husky.toml", m
     assert r.name == "husky-a200"
     assert [a.name for a in r.antennas] == ["gnss_1", "gnss_2"]
     # the paper's 0.95 m baseline, 1.10 m up; 990 x 670 x 390 mm; 1.0 m/s

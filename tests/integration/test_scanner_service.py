@@ -130,8 +130,8 @@ def test_no_ack_is_a_clear_error_within_the_timeout(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
     start(procs, router_endpoint, client_bus, tmp_path, "sim_faults.no_ack=true")
-    # an error reply naming the ACK, within the call's 5 s: a scanner still retrying
-    # would leave the call unanswered (RpcTimeout, "no reply")
+    # an error reply naming the ACK: a scanner retrying without end would leave every
+    # call unanswered (RpcTimeout, "no reply"), until start_scan's 10 s
     with pytest.raises(RpcError, match=r"scanner: .*ACK"):
         start_scan(client_bus, 1)
 

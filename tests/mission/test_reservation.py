@@ -91,8 +91,9 @@ def test_no_two_robots_ever_hold_one_segment(schedule: list[tuple[str, set[str]]
 
 
 def test_the_model_can_fail_without_wanting_first() -> None:
-    """The model catches the race the rule exists for: robots that ask before their
-    wanting is visible both get the segment."""
+    """The race the rule exists for is real: two robots that ask before their wanting
+    is visible are both granted the segment by the rule itself (the interleavings
+    above never ask before wanting, which is what keeps them apart)."""
     a, b = Robot("r1"), Robot("r2")
     # both ask while neither wants anything yet, then both decide
     seen_by_a, seen_by_b = b.claims.answer("r2"), a.claims.answer("r1")
