@@ -18,7 +18,7 @@ SERVICES: dict[str, str] = {
     # scanner drive the simulated robot unchanged
     "reach-sim": "services.gnss.sim.config:ReachSimConfig",
     "husky-sim": "services.base.sim.husky:HuskySimConfig",
-    "faro-sim": "services.scanner.config:FaroSimConfig",
+    "faro-sim": "services.scanner.sim.config:FaroSimConfig",
 }
 
 # where a service's process lives when it is not ``services.<name>``

@@ -1,28 +1,23 @@
-"""The CAN side of the scanner: a real bus, or a bus with the FARO emulator on it.
-
-``BACKENDS`` maps the config's ``backend`` to a factory returning the bus the client
-drives; the sim backend also runs the emulator, whose completed scans the simulator
-renders (``rpc/sim/render``) into the storage folder, as a real scan lands on the
-scanner's card.
+"""The CAN side of the scanner: a real bus, or (``backend = "sim"``) a bus with the
+FARO emulator on it (:mod:`services.scanner.sim.device`), whose completed scans the
+simulator renders (``rpc/sim/render``) into the storage folder, as a real scan lands
+on the scanner's card. :func:`open_device` opens the one the config names.
 """
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Callable
+from pathlib import Path
+from typing import Protocol
 
 import can
 
-from common import clock as clk
-from common.clock import Clock
 from common.config import ConfigError
 from common.service import Context
-from services.scanner.card import RenderedCard, emulate, scan_path
 from services.scanner.config import ScannerConfig
 from services.scanner.slcan_host import SlcanHost
 
-__all__ = ["BACKENDS", "BusOffGate", "CanDevice", "SimDevice", "scan_path"]
+__all__ = ["BusOffGate", "CanDevice", "Device", "open_device", "scan_path"]
 
 # the emulated scan advances this often (sim time): twice its status period of 0.1 s
 TICK_HZ = 20.0
@@ -94,49 +89,28 @@ class BusOffGate(can.BusABC):
         self._inner.shutdown()
 
 
-class SimDevice:
-    """The emulated FARO on a virtual bus private to this process."""
+class Device(Protocol):
+    """What the service drives: the bus its client talks on, the scan project, why
+    the bus is in error ("" when it is not), and closing it."""
 
-    def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
-        channel = f"faro-sim-{os.getpid()}"
-        client_bus = can.Bus(interface="virtual", channel=channel)
-        self._device_bus = can.Bus(interface="virtual", channel=channel)
-        self.card = RenderedCard(ctx, cfg.storage_dir, cfg.render_step_deg)
-        # the scan advances on the service's clock, in a thread of its own that the
-        # clock lets run each step (in lockstep, at a fixed point of it); the
-        # emulator's thread only answers frames
-        self.emulator = emulate(
-            ctx, self._device_bus, self.card, cfg.sim_faults, cfg.sim_scan_time_s, timed=False
-        )
-        self.bus: can.BusABC = BusOffGate(client_bus, self.emulator.bus_off)
-        self.emulator.start()
-        self._stop = threading.Event()
-        self._ticker = threading.Thread(
-            target=self._tick, args=(ctx.clock,), name="faro-scan", daemon=True
-        )
-        self._ticker.start()
+    bus: can.BusABC
+    project: str
 
-    def _tick(self, clock: Clock) -> None:
-        for _ in clk.ticks(clock, TICK_HZ, self._stop):
-            self.emulator.tick()
+    def bus_error(self) -> str: ...
 
-    @property
-    def project(self) -> str:
-        return self.card.project
-
-    @project.setter
-    def project(self, project: str) -> None:
-        self.card.project = project
-
-    def bus_error(self) -> str:
-        return "bus-off (simulated fault)" if self.emulator.bus_off() else ""
-
-    def close(self) -> None:
-        self._stop.set()
-        self._ticker.join(timeout=2.0)
-        self.emulator.stop()
-        self._device_bus.shutdown()
-        self.bus.shutdown()
+    def close(self) -> None: ...
 
 
-BACKENDS: dict[str, type[CanDevice] | type[SimDevice]] = {"can": CanDevice, "sim": SimDevice}
+def open_device(ctx: Context, cfg: ScannerConfig) -> Device:
+    """The device of ``cfg.backend``: a real bus, or the emulated FARO (its module,
+    :mod:`services.scanner.sim`, loaded only then)."""
+    if cfg.backend == "sim":
+        from services.scanner.sim.device import SimDevice
+
+        return SimDevice(ctx, cfg)
+    return CanDevice(ctx, cfg)
+
+
+def scan_path(storage_dir: str, scan_id: int, project: str = "") -> Path:
+    """Where scan ``scan_id`` of ``project`` is stored (FARO's naming: Scan_00001)."""
+    return Path(storage_dir) / project / f"Scan_{scan_id:05d}.e57"

@@ -21,10 +21,9 @@ from common.messages.scan import (
 from common.service import Context
 from common.transport import RequestError
 from services.scanner.can_codec import RESOLUTION_DIVISORS, ScanProfile, ScanState
-from services.scanner.card import scan_path
 from services.scanner.client import ScannerClient, ScannerError
 from services.scanner.config import ScannerConfig
-from services.scanner.device import BACKENDS
+from services.scanner.device import open_device, scan_path
 
 _STATES = {
     ScanState.IDLE: ScannerState.IDLE,
@@ -38,7 +37,7 @@ _STATES = {
 class ScannerService:
     def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
         self.ctx, self.cfg = ctx, cfg
-        self.device = BACKENDS[cfg.backend](ctx, cfg)
+        self.device = open_device(ctx, cfg)
         self.client = ScannerClient(
             self.device.bus,
             now=lambda: ctx.clock.now_ns() / 1e9,

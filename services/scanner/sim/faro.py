@@ -1,7 +1,7 @@
 """The simulated FARO behind a serial CAN adapter, as its own process.
 
 ``python -m services.scanner.sim.faro --manifest M`` (``[services.faro-sim]``, see
-:class:`~services.scanner.config.FaroSimConfig`) runs the FARO emulator on the
+:class:`~services.scanner.sim.config.FaroSimConfig`) runs the FARO emulator on the
 adapter's end of an SLCAN link over a pseudo-terminal, and links ``link`` to the
 terminal. The scanner service then drives it with its hardware backend, unchanged:
 ``backend = "can"``, ``interface = "slcan"``, ``channel = <link>``, through
@@ -23,8 +23,8 @@ from pathlib import Path
 from common import keys
 from common.messages.mission import MissionState
 from common.service import Context, run
-from services.scanner.card import RenderedCard, emulate
-from services.scanner.config import FaroSimConfig
+from services.scanner.sim.card import RenderedCard, emulate
+from services.scanner.sim.config import FaroSimConfig
 from services.scanner.sim.slcan_device import SlcanDevice
 
 

@@ -2,7 +2,7 @@
 (``rpc/sim/render``) into the storage folder, as a real scan lands on the FARO's card.
 
 One implementation for both emulated scanners: the in-process one of the ``sim``
-backend (:class:`services.scanner.device.SimDevice`) and the one across a serial CAN
+backend (:class:`services.scanner.sim.device.SimDevice`) and the one across a serial CAN
 link (:mod:`services.scanner.sim.faro`).
 """
 
@@ -17,15 +17,11 @@ from common import keys
 from common.messages.sim import RenderRequest
 from common.service import Context
 from services.scanner.can_codec import ScanProfile
+from services.scanner.device import scan_path
 from services.scanner.sim.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 # a scan can take minutes to render at fine steps on a small machine
 RENDER_TIMEOUT_S = 300.0
-
-
-def scan_path(storage_dir: str, scan_id: int, project: str = "") -> Path:
-    """Where scan ``scan_id`` of ``project`` is stored (FARO's naming: Scan_00001)."""
-    return Path(storage_dir) / project / f"Scan_{scan_id:05d}.e57"
 
 
 class ScanDuration:
