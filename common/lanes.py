@@ -142,6 +142,15 @@ def homes(xs: F64, ys: F64, origin: F64, robots: int, near: F64 | None = None) -
     return access, access + outward
 
 
+def parked_pose(
+    home: tuple[float, float], access: tuple[float, float]
+) -> tuple[float, float, float]:
+    """Where a parked robot starts: (x, y, heading in degrees) at ``home``, facing
+    ``access``, its way into the field."""
+    facing = math.degrees(math.atan2(access[1] - home[1], access[0] - home[0]))
+    return float(home[0]), float(home[1]), facing
+
+
 def central_cross_lane(xs: F64, pts: F64) -> int:
     """The cross lane (of those at ``xs``) whose intersections with the edge lanes are
     nearest, in summed distance along the lanes, to the locations ``pts`` (M, 2): a

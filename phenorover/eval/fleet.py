@@ -24,7 +24,6 @@ mission logs alone:
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import signal
 import threading
@@ -40,6 +39,7 @@ from common.client import open_client, wait_alive
 from common.config import load_manifest
 from common.field import load_field
 from common.files import write_atomic
+from common.lanes import parked_pose
 from common.messages.mission import MissionStart, MissionState
 from common.messages.plan import PlanOptions, PlanResult
 from common.messages.sim import TruthPose
@@ -138,10 +138,8 @@ def starts(plan: PlanResult) -> list[tuple[float, float, float]]:
     if plan.fleet is None:
         return [(plan.origin[0], plan.origin[1], 0.0)]
     out = []
-    for part in plan.fleet.parts:
-        first = part.legs[0]
-        facing = math.degrees(math.atan2(first.y1 - first.y0, first.x1 - first.x0))
-        out.append((part.home[0], part.home[1], facing))
+    for part in plan.fleet.parts:  # the first leg: from home to its way in
+        out.append(parked_pose(part.home, (part.legs[0].x1, part.legs[0].y1)))
     return out
 
 

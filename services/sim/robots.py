@@ -19,7 +19,7 @@ import numpy as np
 from common import keys
 from common.clock import NS
 from common.field import Field
-from common.lanes import homes
+from common.lanes import homes, parked_pose
 from common.messages.mission import MissionState
 from common.messages.sim import SimWheelCommand
 from common.service import Context
@@ -124,6 +124,5 @@ def starts(cfg: SimConfig, field: Field) -> list[tuple[str, tuple[float, float, 
     access, parked = homes(field.cross_lanes_x, field.row_lanes_y, field.origin_xy, len(names))
     out = []
     for r, a, h in zip(cfg.robots, access, parked, strict=True):
-        facing = math.degrees(math.atan2(a[1] - h[1], a[0] - h[0]))
-        out.append((r.namespace, r.start or (float(h[0]), float(h[1]), facing)))
+        out.append((r.namespace, r.start or parked_pose((h[0], h[1]), (a[0], a[1]))))
     return out
