@@ -197,10 +197,6 @@ def markdown(result: Json, truth: TruthScore | None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write(path: Path, text: str) -> None:
-    write_atomic(path, text.encode())
-
-
 def evaluate(
     run_dir: Path,
     out: Path | None = None,
@@ -220,8 +216,8 @@ def evaluate(
     }
     dest = out or run_dir
     dest.mkdir(parents=True, exist_ok=True)
-    _write(dest / JSON_NAME, json.dumps(finite(result), indent=1, allow_nan=False))
-    _write(dest / MD_NAME, markdown(result, truth))
+    write_atomic(dest / JSON_NAME, json.dumps(finite(result), indent=1, allow_nan=False).encode())
+    write_atomic(dest / MD_NAME, markdown(result, truth).encode())
     return result, truth
 
 
