@@ -29,10 +29,10 @@ import numpy.typing as npt
 from common.arrays import F64, I64
 from common.field import Field, FieldLayout
 from common.files import atomic_write
+from common.messages.core import Finite
 
 HEIGHT_PERCENTILE = 99.0
 MAX_FILE_BYTES = 64 << 20
-Finite = Annotated[float, msgspec.Meta(ge=-1e6, le=1e6)]
 Length = Annotated[float, msgspec.Meta(ge=0.0, le=1e4)]
 Box = tuple[Finite, Finite, Finite, Finite, Length]
 

@@ -2,11 +2,10 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from common.messages.core import BASE_FRAME
+from common.messages.core import BASE_FRAME, Positive
 from common.ros2.types import CmdVelType
 from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
 
 
@@ -39,7 +38,7 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     """
 
     backend: Literal["sim", "ros2"]  # required: a robot must never drive a simulated base
-    watchdog_s: Pos = 0.25
+    watchdog_s: Positive = 0.25
     commander: str = "nav"
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0
     # the odometry's stated variances: ``var_v`` (m/s)^2; for the turn rate the
@@ -64,4 +63,4 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     ros2_domain: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
     ros2_namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
     ros2_node: Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)] = "phenorover_base"
-    ros2_odom_timeout_s: Pos = 0.5
+    ros2_odom_timeout_s: Positive = 0.5

@@ -15,16 +15,14 @@ more than ``baseline_tolerance_m`` are rejected with :class:`BaselineMismatch`.
 from __future__ import annotations
 
 import math
-from typing import Annotated
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
 from common.geo import wrap_angle
+from common.messages.core import Positive
 from common.robot import Robot, default_robot
-
-Positive = Annotated[float, msgspec.Meta(gt=0.0)]
 
 
 class CompassError(ValueError):

@@ -30,16 +30,13 @@ Defaults and their sources:
 from __future__ import annotations
 
 import math
-from typing import Annotated
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from common.messages.core import NonNegative, Positive
 from services.gnss.nmea import FixQuality
-
-Positive = Annotated[float, msgspec.Meta(gt=0.0)]
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
 
 #: Order of rows and columns in :attr:`RtkModelConfig.rates_per_s`.
 STATES: tuple[FixQuality, ...] = (

@@ -3,10 +3,8 @@ from typing import Annotated, Literal
 import msgspec
 
 from common.battery import Pace
-from common.messages.core import RobotName
+from common.messages.core import Positive, RobotName
 from common.messages.scan import ScanProfile
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 def _profile() -> ScanProfile:
@@ -25,8 +23,8 @@ class LanesConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
 
     peers: list[RobotName] = msgspec.field(default_factory=list)
     margin_m: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.3
-    retry_s: Pos = 1.0
-    answer_timeout_s: Pos = 2.0
+    retry_s: Positive = 1.0
+    answer_timeout_s: Positive = 2.0
 
 
 class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -78,32 +76,32 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     """
 
     profile: ScanProfile = msgspec.field(default_factory=_profile)
-    settle_s: Pos = 2.0
-    still_speed: Pos = 0.01
-    still_turn: Pos = 0.01
+    settle_s: Positive = 2.0
+    still_speed: Positive = 0.01
+    still_turn: Positive = 0.01
     scan_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
-    scan_timeout_s: Pos = 1800.0
+    scan_timeout_s: Positive = 1800.0
     blocked_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 1
-    route_time_s: Pos = 300.0
-    route_min_speed: Pos = 0.05
-    settle_timeout_s: Pos = 900.0
-    arrival_tolerance_m: Pos = 0.05
-    scan_tolerance_m: Pos = 0.10
+    route_time_s: Positive = 300.0
+    route_min_speed: Positive = 0.05
+    settle_timeout_s: Positive = 900.0
+    arrival_tolerance_m: Positive = 0.05
+    scan_tolerance_m: Positive = 0.10
     position_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600)] = 2.0
-    rpc_timeout_s: Pos = 5.0
-    rpc_patience_s: Pos = 120.0
-    scanner_lost_s: Pos = 10.0
-    nav_lost_s: Pos = 5.0
-    plan_timeout_s: Pos = 300.0
+    rpc_timeout_s: Positive = 5.0
+    rpc_patience_s: Positive = 120.0
+    scanner_lost_s: Positive = 10.0
+    nav_lost_s: Positive = 5.0
+    plan_timeout_s: Positive = 300.0
     scan_pose: Literal["end", "mean"] = "end"
     return_to_origin: bool = True
     resume: bool = True
     register_on_done: bool = True
     traits_on_done: bool = True
-    battery_stale_s: Pos = 10.0
+    battery_stale_s: Positive = 10.0
     swapped_at: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.9
-    origin_radius_m: Pos = 2.0
+    origin_radius_m: Positive = 2.0
     pace: Pace = msgspec.field(default_factory=Pace)
     share: Annotated[int, msgspec.Meta(ge=0, le=64)] = 0
     lanes: LanesConfig = msgspec.field(default_factory=LanesConfig)

@@ -6,13 +6,12 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError
+from common.messages.core import Positive
 from common.robot import Robot
 from services.nav.ekf import EkfConfig
 from services.nav.follower_config import FollowerConfig
 from services.nav.gyro import GyroConfig
 from services.nav.tilt import TiltConfig
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -47,17 +46,17 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     gyro: GyroConfig = msgspec.field(default_factory=GyroConfig)
     follower: FollowerConfig = msgspec.field(default_factory=FollowerConfig)
     fuse_fix_types: list[str] = msgspec.field(default_factory=lambda: ["FIX"])
-    obstacle_distance_m: Pos = 0.6
-    obstacle_half_width_m: Pos = 0.30
+    obstacle_distance_m: Positive = 0.6
+    obstacle_half_width_m: Positive = 0.30
     obstacle_min_points: Annotated[int, msgspec.Meta(ge=1)] = 3
     obstacle_scans: Annotated[int, msgspec.Meta(ge=1)] = 2
     obstacle_crop_margin_m: Annotated[float, msgspec.Meta(ge=0)] = 0.15
-    still_after_s: Pos = 1.0
+    still_after_s: Positive = 1.0
     # a leg ending farther than this outside the field's boundary is refused: the
     # field's survey, the drive home and the experiments stay within metres of it, so
     # such a route is mistyped or forged, not a survey (one 12,700 km away once set
     # the robot turning towards it)
-    route_margin_m: Pos = 25.0
+    route_margin_m: Positive = 25.0
     # the dead-reckoning allowance: with no RTK-fixed position fused for this long the
     # robot is not localized and stops. 0.25 s (one fix at 10 Hz may go missing) at
     # 0.5 m/s is 0.125 m on odometry (a millimetre of drift); braking from 0.5 m/s
@@ -65,7 +64,7 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     # the robot is below 2 cm/s within 1 s of the last fix. A sim running many times
     # faster than real time needs more: a fix late by 50 ms of wall time is late by
     # 0.5 s of sim time at 10x (deploy/sim.toml says so).
-    max_fix_age_s: Pos = 0.25
+    max_fix_age_s: Positive = 0.25
 
 
 @dataclasses.dataclass(frozen=True)

@@ -6,7 +6,7 @@ from typing import Annotated
 
 import msgspec
 
-Pos = Annotated[float, msgspec.Meta(gt=0, le=1e300)]
+from common.messages.core import Positive
 
 
 class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -21,12 +21,12 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     stamped more than ``max_stamp_skew_s`` from the filter's time (s).
     """
 
-    accel_sd: Pos = 0.5  # m/s^2, Husky's commanded accelerations
-    yaw_accel_sd: Pos = 1.0  # rad/s^2
-    pos_process_sd: Pos = 0.005  # m/sqrt(s): unmodelled slip and terrain
-    yaw_process_sd: Pos = 0.005  # rad/sqrt(s)
+    accel_sd: Positive = 0.5  # m/s^2, Husky's commanded accelerations
+    yaw_accel_sd: Positive = 1.0  # rad/s^2
+    pos_process_sd: Positive = 0.005  # m/sqrt(s): unmodelled slip and terrain
+    yaw_process_sd: Positive = 0.005  # rad/sqrt(s)
     gate: bool = True
-    localized_sigma_m: Pos = 0.05
+    localized_sigma_m: Positive = 0.05
     # after this many consecutive rejections of one measurement type that agree with
     # each other (each innovation within the gate of the one before) the filter, not
     # the sensor, is taken to be wrong: the states the measurement observes directly
@@ -49,8 +49,8 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     gnss_correlation_s: Annotated[float, msgspec.Meta(ge=0, le=1e300)] = 2.0
     # base_link height: a random walk (m/sqrt(s), at full speed; the terrain's
     # bumps and slope) observed by the antennas' RTK heights
-    z_process_sd: Pos = 0.05
-    max_gap_s: Pos = 1.0  # predict at most this far in one step
+    z_process_sd: Positive = 0.05
+    max_gap_s: Positive = 1.0  # predict at most this far in one step
     # robot_localization's dynamic_process_noise_covariance: the position and heading
     # process noise stand for slip, which needs motion, so it scales with the speed
     # (full at ``full_noise_speed`` m/s or rad/s, never below ``still_noise_share``
@@ -58,13 +58,13 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     # of following every fix's multipath wander. Speeds below the encoders' noise
     # (``still_speed``, m/s and rad/s) count as standing.
     dynamic_process_noise: bool = True
-    full_noise_speed: Pos = 0.2
-    still_speed: Pos = 0.01
+    full_noise_speed: Positive = 0.2
+    still_speed: Positive = 0.01
     still_noise_share: Annotated[float, msgspec.Meta(gt=0, le=1)] = 1e-5
     # zero-velocity update: while the robot is known to stand (wheels commanded still
     # and reading still), its velocities are measured as zero to this 1-sigma (m/s,
     # rad/s) instead of integrating the encoders' noise into position and heading
-    zero_velocity_sd: Pos = 1e-4
+    zero_velocity_sd: Positive = 1e-4
     zero_velocity_updates: bool = True
     # a GNSS measurement arrives ~0.1 s after its epoch: fuse it against the state
     # of its epoch (the motion since taken back through the unicycle model), not as
@@ -73,12 +73,12 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     # no RTK receiver is better than a millimetre, nor a two-antenna compass than
     # 0.006 deg: a fix claiming 1e-30 m^2 would collapse the covariance to nothing
     # and the gate would reject the truth ever after
-    min_fix_sd_m: Pos = 0.001
-    min_yaw_sd: Pos = 1e-4
+    min_fix_sd_m: Positive = 0.001
+    min_yaw_sd: Positive = 1e-4
     # the velocity command's own bounds (common.messages.base.Twist)
-    max_speed: Pos = 5.0
-    max_turn_rate: Pos = 10.0
+    max_speed: Positive = 5.0
+    max_turn_rate: Positive = 10.0
     # services stamp on one clock (wall, or the sim's), so a stamp further than this
     # from the filter's time is another clock or garbage; GNSS is ~0.1 s late and a
     # restarted simulator resumes ~1 s behind
-    max_stamp_skew_s: Pos = 5.0
+    max_stamp_skew_s: Positive = 5.0

@@ -6,7 +6,7 @@ from typing import Annotated
 
 import msgspec
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
+from common.messages.core import Positive
 
 
 class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -28,70 +28,70 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     across it, inside the mission's 5 cm arrival check and the lane's clearance)
     and settles only as long as judging that takes."""
 
-    lookahead_m: Pos = 0.6
+    lookahead_m: Positive = 0.6
     # an in-place turn toward a leg ends within this of the leg's heading
-    align_tolerance_deg: Pos = 0.5
+    align_tolerance_deg: Positive = 0.5
     # on the route's last leg, toward the scan location: pure pursuit closes a
     # lateral offset over about one look-ahead of travel, and the corner turn before
     # it shifts the robot sideways by centimetres
-    final_lookahead_m: Pos = 0.5
+    final_lookahead_m: Positive = 0.5
     # pure pursuit steers from the pose this far ahead under the last command (the
     # drivetrain's lag, about 0.15 s, and the control period): a command acts on the
     # robot as it will be, not as it was, which keeps the loop damped at speed
     predict_s: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.15
-    max_speed: Pos = 0.5
-    max_accel: Pos = 0.5
+    max_speed: Positive = 0.5
+    max_accel: Positive = 0.5
     # a turn in place runs at up to ``max_turn_rate``, slowing as it nears its heading
     # at the lowest of ``rotate_gain`` times the error and the rate it can still brake
     # from at ``turn_braking`` of ``max_turn_accel`` (a margin for the drivetrain's
     # lag): the turn takes about its physical time, where a proportional law alone
     # spends seconds in its exponential tail (tests/nav/test_follower.py holds both)
-    max_turn_rate: Pos = 1.2
-    max_turn_accel: Pos = 2.0
-    rotate_gain: Pos = 3.0
+    max_turn_rate: Positive = 1.2
+    max_turn_accel: Positive = 2.0
+    rotate_gain: Positive = 3.0
     turn_braking: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.5
-    min_turn_rate: Pos = 0.04
-    heading_tolerance_deg: Pos = 2.0
-    goal_tolerance_m: Pos = 0.02
-    min_speed: Pos = 0.03
-    obstacle_timeout_s: Pos = 30.0
+    min_turn_rate: Positive = 0.04
+    heading_tolerance_deg: Positive = 2.0
+    goal_tolerance_m: Positive = 0.02
+    min_speed: Positive = 0.03
+    obstacle_timeout_s: Positive = 30.0
     # fine positioning at the route's end (the scan location)
     fine: bool = True
-    fine_tolerance_m: Pos = 0.02
+    fine_tolerance_m: Positive = 0.02
     # trims to a planned heading (a scan location has none) stop this close to it, or
     # within the filter's heading SD when that is larger
-    fine_heading_tolerance_deg: Pos = 0.5
+    fine_heading_tolerance_deg: Positive = 0.5
     # stand at least this long on arrival (the drivetrain's lag, and the estimate
     # taking in that the robot stands), and this long after a creep or trim
-    fine_settle_s: Pos = 1.0
-    fine_resettle_s: Pos = 1.0
+    fine_settle_s: Positive = 1.0
+    fine_resettle_s: Positive = 1.0
     # ... and on arrival until the estimate's position SD (its larger axis, the
     # filter's own, which counts the fixes' correlation over seconds) is below this,
     # at most ``fine_settle_max_s``: a centimetre judges a 2-3 cm tolerance
-    fine_settle_sd_m: Pos = 0.01
-    fine_settle_max_s: Pos = 10.0
-    creep_speed: Pos = 0.03
-    creep_turn_rate: Pos = 0.02
+    fine_settle_sd_m: Positive = 0.01
+    fine_settle_max_s: Positive = 10.0
+    creep_speed: Positive = 0.03
+    creep_turn_rate: Positive = 0.02
     # how long a creep command takes to show in the pose (drivetrain lag plus the
     # estimate's): the creep stops this much early so it does not overshoot
-    creep_latency_s: Pos = 0.2
+    creep_latency_s: Positive = 0.2
     # at most this many creeps (re-approaches included) and as many heading trims
     fine_moves: Annotated[int, msgspec.Meta(ge=0)] = 6
     # a sideways offset cannot be crept away by a skid-steer robot: it backs up along
     # the leg (at most the leg's length) and comes in again slowly, so that its pose
     # estimate, settled while standing, is carried by odometry rather than pulled by
     # each moving fix
-    reapproach_m: Pos = 0.8
-    reapproach_speed: Pos = 0.1
+    reapproach_m: Positive = 0.8
+    reapproach_speed: Positive = 0.1
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
-    reapproach_tolerance_m: Pos = 0.03
+    reapproach_tolerance_m: Positive = 0.03
     # arrival is declared only within this distance of the route's end and this angle
     # of its planned heading; else the route fails: a scan must never be taken where
     # the robot merely stopped. The heading's is its own setting, not the in-place
     # turn's ``heading_tolerance_deg``: a last leg without a final turn ends at the
     # angle pure pursuit steered to close a sideways offset
-    arrival_tolerance_m: Pos = 0.05
+    arrival_tolerance_m: Positive = 0.05
     arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     # a route sent with ``join`` starts on the first leg passing this close to the
     # robot (lanes are 1.8 m apart or more, so a neighbouring lane never qualifies)
-    join_distance_m: Pos = 0.5
+    join_distance_m: Positive = 0.5

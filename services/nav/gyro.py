@@ -32,7 +32,7 @@ from typing import Annotated
 
 import msgspec
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
+from common.messages.core import Positive
 
 
 class GyroConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -45,12 +45,12 @@ class GyroConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     refused as absurd (the Husky turns at 2 rad/s at most)."""
 
     enabled: bool = True
-    sd: Pos = 0.01
-    bias_tau_s: Pos = 30.0
+    sd: Positive = 0.01
+    bias_tau_s: Positive = 30.0
     min_still_samples: Annotated[int, msgspec.Meta(ge=1)] = 20
-    max_rate: Pos = 4.0
+    max_rate: Positive = 4.0
     # a rate older than this (s) no longer stands in for the wheels'
-    max_age_s: Pos = 0.3
+    max_age_s: Positive = 0.3
 
 
 class Gyro:

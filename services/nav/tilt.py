@@ -27,16 +27,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Annotated
 
 import msgspec
 import numpy as np
 
 from common.geo import euler_zyx, rot_zyx
+from common.messages.core import Positive
 from common.robot import ImuMount
 from services.nav.turn_level import TurnLevel, TurnLevelConfig
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class TiltConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -53,13 +51,13 @@ class TiltConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     bias from turns in place, until a scan's compensator reading gives a better one."""
 
     enabled: bool = True
-    tau_s: Pos = 0.5
-    max_accel: Pos = 0.1
-    accel_window_s: Pos = 0.5
-    max_age_s: Pos = 2.0
+    tau_s: Positive = 0.5
+    max_accel: Positive = 0.1
+    accel_window_s: Positive = 0.5
+    max_age_s: Positive = 2.0
     calibrate: bool = True
-    compensator_range_deg: Pos = 2.0
-    max_tilt_deg: Pos = 20.0
+    compensator_range_deg: Positive = 2.0
+    max_tilt_deg: Positive = 20.0
     turns: TurnLevelConfig = msgspec.field(default_factory=TurnLevelConfig)
 
 

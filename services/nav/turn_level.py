@@ -24,7 +24,8 @@ from typing import Annotated
 import msgspec
 import numpy as np
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
+from common.messages.core import Positive
+
 # a spot holds at most this many samples (over half an hour standing at 10 Hz): the
 # headings a turn adds come at its end, so a long stand must not crowd them out
 MAX_SAMPLES = 20_000
@@ -39,11 +40,11 @@ class TurnLevelConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_
     spot's fit needs that many samples and residuals below that RMS."""
 
     enabled: bool = True
-    spot_radius_m: Pos = 0.1
-    still_speed: Pos = 0.02
-    min_span_deg: Pos = 60.0
+    spot_radius_m: Positive = 0.1
+    still_speed: Positive = 0.02
+    min_span_deg: Positive = 60.0
     min_samples: Annotated[int, msgspec.Meta(ge=4)] = 20
-    max_residual_deg: Pos = 0.3
+    max_residual_deg: Positive = 0.3
 
 
 def heading_span(psi: np.ndarray) -> float:

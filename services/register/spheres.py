@@ -28,25 +28,24 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from common.arrays import F64
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
+from common.messages.core import Positive
 
 
 class SphereConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Sphere detection (metres). The defaults suit Koppa 200 mm spheres scanned at
     the paper's 0.36 deg step (6 mm at 1 m): ~8 points on a sphere at 10 m."""
 
-    radius: Pos = 0.1
+    radius: Positive = 0.1
     min_intensity: Annotated[float, msgspec.Meta(ge=0)] = 0.6
     min_points: Annotated[int, msgspec.Meta(ge=4)] = 6
     # inlier band of the RANSAC fit and the largest accepted RMS residual
-    inlier_threshold: Pos = 0.006
-    max_rms: Pos = 0.004
+    inlier_threshold: Positive = 0.006
+    max_rms: Positive = 0.004
     # a free-radius fit (made when there are >= free_fit_points) must agree this well
-    radius_tolerance: Pos = 0.015
+    radius_tolerance: Positive = 0.015
     free_fit_points: Annotated[int, msgspec.Meta(ge=4)] = 30
     ransac_iterations: Annotated[int, msgspec.Meta(ge=1)] = 200
-    max_range: Pos = 40.0
+    max_range: Positive = 40.0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -29,21 +29,20 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from common.arrays import I64
+from common.messages.core import Positive
 from common.poses import F64, apply
 from services.register.poses import perturb
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Target matching and adjustment (metres, degrees)."""
 
-    match_radius: Pos = 0.5
-    sigma_target: Pos = 0.002
-    sigma_tilt_deg: Pos = 0.02
+    match_radius: Positive = 0.5
+    sigma_target: Positive = 0.002
+    sigma_tilt_deg: Positive = 0.02
     # gauge only: loose enough that the targets decide the relative placement
-    sigma_nav_m: Pos = 0.5
-    sigma_nav_yaw_deg: Pos = 5.0
+    sigma_nav_m: Positive = 0.5
+    sigma_nav_yaw_deg: Positive = 5.0
     min_targets: Annotated[int, msgspec.Meta(ge=1)] = 2
 
 

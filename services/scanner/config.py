@@ -2,9 +2,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.messages.core import Positive
 from services.scanner.sim.faults import FaroFaults
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -25,12 +24,12 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     bitrate: Annotated[int, msgspec.Meta(gt=0)] = 500_000
     tty_baudrate: Annotated[int, msgspec.Meta(gt=0)] = 115_200  # slcan only
     storage_dir: str = "runs/scanner-card"
-    ack_timeout_s: Pos = 0.5
+    ack_timeout_s: Positive = 0.5
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
-    stuck_timeout_s: Pos = 60.0
-    status_timeout_s: Pos = 5.0
+    stuck_timeout_s: Positive = 60.0
+    status_timeout_s: Positive = 5.0
     status_hz: Annotated[float, msgspec.Meta(gt=0, le=50)] = 5.0
     # simulation only
     sim_faults: FaroFaults = msgspec.field(default_factory=FaroFaults)
-    sim_scan_time_s: Pos | None = None  # default: the profile's FARO scan time
+    sim_scan_time_s: Positive | None = None  # default: the profile's FARO scan time
     render_step_deg: Annotated[float, msgspec.Meta(gt=0, le=5)] = 0.36

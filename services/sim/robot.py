@@ -35,11 +35,11 @@ import numpy.typing as npt
 
 from common.arrays import F64
 from common.geo import rot_zyx, wrap_angle
+from common.messages.core import Positive
 from common.robot import Robot, default_robot
 from services.sim.terrain import Terrain
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
-NonNeg = Annotated[float, msgspec.Meta(ge=0)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0)]
 
 
 class RobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -49,21 +49,21 @@ class RobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """
 
     # first-order lag of the motor speed loops
-    tau: Pos = 0.15
+    tau: Positive = 0.15
     slip_long: Annotated[float, msgspec.Meta(ge=0, lt=1)] = 0.01
     # body yaw rate / wheel-implied yaw rate on firm soil (soil = 1)
     yaw_efficiency: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.93
     # relative random fluctuation of the yaw rate while turning (1/sqrt(Hz))
-    yaw_noise: NonNeg = 0.02
+    yaw_noise: NonNegative = 0.02
     # std (m) and correlation time (s) of the rotation-centre offset, per unit soil
-    icr_std: NonNeg = 0.03
-    icr_tau: Pos = 2.0
+    icr_std: NonNegative = 0.03
+    icr_tau: Positive = 2.0
     # white lateral velocity noise while moving or turning (m/s per (m/s or rad/s))
-    lateral_noise: NonNeg = 0.01
+    lateral_noise: NonNegative = 0.01
     # wheel encoders: relative scale error (wheel radius on soil) and white noise
     encoder_scale: float = 0.005
-    encoder_v_std: NonNeg = 0.005
-    encoder_w_std: NonNeg = 0.01
+    encoder_v_std: NonNegative = 0.005
+    encoder_w_std: NonNegative = 0.01
 
 
 @dataclasses.dataclass(frozen=True)

@@ -17,6 +17,7 @@ import numpy.typing as npt
 from common.arrays import F64, U8
 from common.field import Field, FieldLayout
 from common.geo import rot_zyx
+from common.messages.core import Positive
 from common.robot import Robot, default_robot
 from services.sim import lidar as lidar_mod
 from services.sim import robot as robot_mod
@@ -36,17 +37,15 @@ from services.sim.terrain import Terrain, TerrainConfig, build_terrain
 from services.sim.trial import TrialConfig, TrialPlan, plan_trial
 from services.sim.truth_points import truth_points
 
-Pos = Annotated[float, msgspec.Meta(gt=0)]
-
 
 class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
     """An axis-aligned box standing on the ground, centred at (x, y) (m)."""
 
     x: float
     y: float
-    size_x: Pos
-    size_y: Pos
-    height: Pos
+    size_x: Positive
+    size_y: Positive
+    height: Positive
 
 
 class CylinderObstacle(
@@ -56,8 +55,8 @@ class CylinderObstacle(
 
     x: float
     y: float
-    radius: Pos
-    height: Pos
+    radius: Positive
+    height: Positive
 
 
 Obstacle = BoxObstacle | CylinderObstacle

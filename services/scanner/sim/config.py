@@ -4,9 +4,8 @@ from typing import Annotated
 
 import msgspec
 
+from common.messages.core import Positive
 from services.scanner.sim.faults import FaroFaults
-
-Pos = Annotated[float, msgspec.Meta(gt=0)]
 
 
 class FaroSimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -21,5 +20,5 @@ class FaroSimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     link: str = "runs/hil/faro-can"
     storage_dir: str = "runs/scanner-card"
     faults: FaroFaults = msgspec.field(default_factory=FaroFaults)
-    scan_time_s: Pos | None = None
+    scan_time_s: Positive | None = None
     render_step_deg: Annotated[float, msgspec.Meta(gt=0, le=5)] = 0.36

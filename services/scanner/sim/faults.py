@@ -9,9 +9,9 @@ from typing import Annotated
 
 import msgspec
 
-log = logging.getLogger(__name__)
+from common.messages.core import NonNegative
 
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+log = logging.getLogger(__name__)
 
 
 class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
