@@ -73,6 +73,11 @@ def round_trip_halves(legs: list[Leg]) -> tuple[list[Leg], list[Leg]]:
     return legs[: k + 1], legs[k + 1 :]
 
 
+#: how far from a route's end (m) its follower may stop and still have arrived, unless
+#: the route says otherwise: a scan location's, the mission's ``arrival_tolerance_m``
+ARRIVAL_TOLERANCE_M = 0.05
+
+
 class FollowRoute(msgspec.Struct, frozen=True, tag=True):
     """Follow ``legs``. The route holds for ``lease_s`` seconds (on navigation's clock)
     and must be renewed (:class:`RenewRoute`) before that, or the robot stops: whoever
@@ -80,13 +85,18 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
 
     ``join``: start on the first leg that passes within the follower's join distance
     of the robot instead of the first leg, so a route re-sent after a restart
-    continues where the robot stands rather than driving back to its start."""
+    continues where the robot stands rather than driving back to its start.
+
+    ``arrival_tolerance_m``: the route has arrived only when the estimate is this close
+    to its end; else it fails (a scan must never be taken where the robot merely
+    stopped). Its sender knows what its goal needs, so the route carries it."""
 
     route_id: str
     legs: list[Leg]
     max_speed: Annotated[float, msgspec.Meta(gt=0, le=2.0)] = 0.5
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
     join: bool = False
+    arrival_tolerance_m: Annotated[float, msgspec.Meta(gt=0, le=100.0)] = ARRIVAL_TOLERANCE_M
 
 
 class CancelRoute(msgspec.Struct, frozen=True, tag=True):

@@ -61,8 +61,8 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "rotate_gain": 1.5,
                 "turn_braking": 1.0,
                 # the paper's robot scanned wherever its navigation stopped it: our
-                # arrival check (5 cm) would skip its scans, so it is widened
-                "arrival_tolerance_m": PAPER_ARRIVAL_M,
+                # arrival check (5 cm, the mission's below) would skip its scans, so
+                # it is widened
                 "arrival_heading_tolerance_deg": 180.0,
             },
         },

@@ -4,6 +4,7 @@ import msgspec
 
 from common.battery import Pace
 from common.messages.core import Positive, RobotName
+from common.messages.nav import ARRIVAL_TOLERANCE_M
 from common.messages.scan import ScanProfile
 
 
@@ -35,9 +36,10 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     attempts after a scanner error before the location is marked failed.
     ``blocked_retries``: route attempts after navigation reports blocked (or fails)
     before the location is skipped. ``arrival_tolerance_m``: how far the pose estimate
-    may be from the planned location before a scan starts (the follower arrives to
-    centimetres); ``position_retries`` drives to get there. ``scan_tolerance_m``: how
-    far the estimate's mean over the scan may be and the scan still count: the robot
+    may be from the planned location before a scan starts (each route to a location
+    carries it: navigation arrives within it or fails); ``position_retries`` drives to
+    get there. ``scan_tolerance_m``: how far the estimate's mean over the scan may be
+    and the scan still count: the robot
     stands still through it (its spread must stay within half the arrival
     tolerance), so what moves is the estimate under the crop, and a stop this far off
     still sees every cell the plan covers (the planner's visibility: ``bench_planner``'s
@@ -85,7 +87,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     route_time_s: Positive = 300.0
     route_min_speed: Positive = 0.05
     settle_timeout_s: Positive = 900.0
-    arrival_tolerance_m: Positive = 0.05
+    arrival_tolerance_m: Positive = ARRIVAL_TOLERANCE_M
     scan_tolerance_m: Positive = 0.10
     position_retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600)] = 2.0

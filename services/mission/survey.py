@@ -176,7 +176,13 @@ class Survey:
 
     def _send(self, seg: Segment, rid: str) -> int:
         """Send the route; the clock time it was sent at."""
-        route = FollowRoute(route_id=rid, legs=seg.legs, lease_s=self.cfg.lease_s, join=True)
+        route = FollowRoute(
+            route_id=rid,
+            legs=seg.legs,
+            lease_s=self.cfg.lease_s,
+            join=True,
+            arrival_tolerance_m=self.cfg.arrival_tolerance_m,
+        )
         sent = self.now()
         rep: NavReply = self.call(keys.NAV_CMD, route)
         if not rep.accepted:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 
 from common.geo import wrap_angle
-from common.messages.nav import LEASE_ENDED, Leg, NavState
+from common.messages.nav import ARRIVAL_TOLERANCE_M, LEASE_ENDED, Leg, NavState
 from services.nav.fine import Fine
 from services.nav.follower_config import FollowerConfig
 from services.nav.follower_types import Command, Phase, Tick, leg_length
@@ -46,6 +46,7 @@ class Follower:
         self._backup_to = 0.0  # distance behind the goal a back-up ends at (m)
         self.lease_until = math.inf
         self._join = False
+        self.arrival_tolerance_m = ARRIVAL_TOLERANCE_M
         self.end_detail = ""  # how the last route ended (arrival or failure), for progress
 
     def start(
@@ -55,14 +56,17 @@ class Follower:
         max_speed: float | None = None,
         lease_until: float = math.inf,
         join: bool = False,
+        arrival_tolerance_m: float = ARRIVAL_TOLERANCE_M,
     ) -> None:
         """Follow ``legs`` until ``lease_until`` (seconds, the clock of :meth:`step`)
         unless renewed; with ``join``, start on the first leg passing within
         ``join_distance_m`` of the robot, decided at the first localized step (a
-        restarted navigation is not localized yet when the route is sent again)."""
+        restarted navigation is not localized yet when the route is sent again). The route
+        has arrived only within ``arrival_tolerance_m`` of its end (the route's own)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
         self.lease_until = lease_until
         self._join = join
+        self.arrival_tolerance_m = arrival_tolerance_m
         self.end_detail = ""
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
@@ -290,7 +294,7 @@ class Follower:
         leg = self.legs[-1]
         off = math.hypot(leg.x1 - k.x, leg.y1 - k.y)
         what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"
-        if off <= self.cfg.arrival_tolerance_m and abs(yaw_err) <= math.radians(
+        if off <= self.arrival_tolerance_m and abs(yaw_err) <= math.radians(
             self.cfg.arrival_heading_tolerance_deg
         ):
             return self._out(k, 0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")

@@ -85,12 +85,12 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     reapproach_speed: Positive = 0.1
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
     reapproach_tolerance_m: Positive = 0.03
-    # arrival is declared only within this distance of the route's end and this angle
-    # of its planned heading; else the route fails: a scan must never be taken where
-    # the robot merely stopped. The heading's is its own setting, not the in-place
-    # turn's ``heading_tolerance_deg``: a last leg without a final turn ends at the
-    # angle pure pursuit steered to close a sideways offset
-    arrival_tolerance_m: Positive = 0.05
+    # arrival is declared only within this angle of the route's planned heading (and
+    # within the route's own distance, ``FollowRoute.arrival_tolerance_m``); else the
+    # route fails: a scan must never be taken where the robot merely stopped. It is
+    # its own setting, not the in-place turn's ``heading_tolerance_deg``: a last leg
+    # without a final turn ends at the angle pure pursuit steered to close a sideways
+    # offset
     arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     # a route sent with ``join`` starts on the first leg passing this close to the
     # robot (lanes are 1.8 m apart or more, so a neighbouring lane never qualifies)

@@ -38,7 +38,9 @@ class Routes:
                     if why := self._off_field(legs):
                         self.log.warning("route %s refused: %s", rid, why)
                         return NavReply(stamp_ns=now, accepted=False, reason=why)
-                    self.follower.start(rid, legs, vmax, lease_until=t + lease, join=cmd.join)
+                    self.follower.start(
+                        rid, legs, vmax, t + lease, cmd.join, cmd.arrival_tolerance_m
+                    )
                     self.log.info(
                         "route %s: %d legs, from leg %d", rid, len(legs), self.follower.leg
                     )

@@ -213,6 +213,9 @@ def test_arrival_checks_the_heading_with_its_own_tolerance() -> None:
     loose.start("r", [leg])
     assert loose._arrive(at(1.0), math.radians(5.0)).state == NavState.ARRIVED
     assert loose._arrive(at(1.1), 0.0).state == NavState.FAILED  # 10 cm off
+    # the distance is the route's own: a route asking 25 cm arrives 10 cm off
+    loose.start("r", [leg], arrival_tolerance_m=0.25)
+    assert loose._arrive(at(1.1), 0.0).state == NavState.ARRIVED
 
 
 def test_the_fine_phase_reads_the_worse_axis_and_an_unknown_covariance_as_infinite() -> None:
