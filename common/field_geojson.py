@@ -39,6 +39,8 @@ from common.field_model import (
     NonNeg,
     Pos,
     Voxel,
+    default_half_length,
+    default_half_width,
 )
 from common.geo import FieldFrame
 
@@ -55,8 +57,8 @@ class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     voxel_y: Voxel = 0.5
     voxel_z: Voxel = 0.33
     min_scan_distance: NonNeg = 0.6
-    robot_half_length: NonNeg = 0.495
-    robot_half_width: NonNeg = 0.335
+    robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
+    robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
     origin_alt: Altitude = 0.0
     start_corner: Corner = "bottom-right"
     planting_date: datetime.date | None = None

@@ -68,6 +68,16 @@ class PlotRecord(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 Book = Annotated[tuple[PlotRecord, ...], msgspec.Meta(max_length=MAX_PLOTS)]
 
 
+def default_half_length() -> float:
+    """Half the length of the robot description's footprint (m)."""
+    return default_robot().footprint.length / 2
+
+
+def default_half_width() -> float:
+    """Half the width of the robot description's footprint (m)."""
+    return default_robot().footprint.width / 2
+
+
 class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A regular plot-based breeding field, as a breeder describes it (metres, degrees).
 
@@ -77,7 +87,8 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     free strip beyond the two outer rows (default: ``headland_width``). Plots are cut
     into ``voxel_*`` cells. A lane intersection is a candidate scan location when the
     scanner is at least ``min_scan_distance`` (horizontally) from every plot and the robot
-    footprint (``robot_half_length`` x ``robot_half_width``, Husky A200 by default) fits
+    footprint (``robot_half_length`` x ``robot_half_width``; by default half the robot
+    description's footprint, the paper's Husky A200) fits
     there facing along one of the two lanes. ``origin_*`` (WGS84) georeference the
     field frame origin; ``row_bearing_deg`` is the bearing of the field x axis, degrees
     clockwise from north. ``start_corner`` is where tours start and end (the paper's
@@ -106,8 +117,8 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     voxel_y: Voxel = 0.5
     voxel_z: Voxel = 0.33
     min_scan_distance: NonNeg = 0.6
-    robot_half_length: NonNeg = 0.495
-    robot_half_width: NonNeg = 0.335
+    robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
+    robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
     origin_lat: Annotated[float, msgspec.Meta(ge=-90, le=90)] | None = None
     origin_lon: Annotated[float, msgspec.Meta(ge=-180, le=180)] | None = None
     origin_alt: Altitude = 0.0
