@@ -11,6 +11,9 @@ from here; payloads carry the 4-byte CDR encapsulation header (little-endian, ``
 # which mypy cannot see a list is one of.)
 
 import math
+import warnings
+
+from scipy.spatial.transform import Rotation
 
 from common.ros2.idl import (
     BatteryState,
@@ -120,29 +123,20 @@ def quaternion_of_yaw(yaw: float) -> Quaternion:
 def quaternion_of_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
     """The unit quaternion of ZYX Euler angles (rad): yaw about z, then pitch about the
     new y, then roll about the new x (REP-103's roll, pitch, yaw)."""
-    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
-    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
-    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
-    return Quaternion(
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-        cr * cp * cy + sr * sp * sy,
-    )
+    x, y, z, w = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
+    return Quaternion(float(x), float(y), float(z), float(w))
 
 
 def euler_of(q: Quaternion) -> tuple[float, float, float]:
     """ZYX Euler angles (roll, pitch, yaw; rad) of a quaternion, normalised first (a
     zero quaternion reads as no rotation). Pitch is in [-pi/2, pi/2]; at +-pi/2 roll
     and yaw are not separable (gimbal lock)."""
-    x, y, z, w = q.x, q.y, q.z, q.w
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    if n > 0.0:
-        x, y, z, w = x / n, y / n, z / n, w / n
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
+    if q.x == q.y == q.z == q.w == 0.0:
+        return 0.0, 0.0, 0.0
+    with warnings.catch_warnings():  # gimbal lock is documented above, not an error
+        warnings.simplefilter("ignore", UserWarning)
+        yaw, pitch, roll = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler("ZYX")
+    return float(roll), float(pitch), float(yaw)
 
 
 def time_of_ns(stamp_ns: int) -> Time:

@@ -8,9 +8,9 @@ radius followed by a least-squares fit decides whether it is a sphere. Scans wit
 intensity (all zero) give no candidates.
 
 Fitting: :func:`fit_sphere` minimises the geometric residual ``|p - c| - r`` by
-Gauss-Newton, with the radius known or free. A scanner sees only the near cap of a
-sphere, so the centre is started behind the visible surface as seen from the scanner
-(the frame origin).
+Levenberg-Marquardt (scipy's ``least_squares``), with the radius known or free. A
+scanner sees only the near cap of a sphere, so the centre is started behind the
+visible surface as seen from the scanner (the frame origin).
 
 All coordinates are in the frame of the points given (the ``scanner`` frame for a
 scan), metres.
@@ -24,6 +24,7 @@ from typing import Annotated
 import msgspec
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import least_squares
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -79,22 +80,25 @@ def fit_sphere(
         r0 = radius if radius is not None else _algebraic_radius(pts)
         view = mean / max(float(np.linalg.norm(mean)), 1e-9)
         init = mean + view * 0.7 * r0
-    c = np.asarray(init, dtype=np.float64).copy()
-    r = float(radius) if radius is not None else float(np.linalg.norm(pts - c, axis=1).mean())
-    for _ in range(iterations):
-        d = pts - c
+    c0 = np.asarray(init, dtype=np.float64)
+    r0 = float(radius) if radius is not None else float(np.linalg.norm(pts - c0, axis=1).mean())
+    x0 = c0 if radius is not None else np.append(c0, r0)
+
+    def residuals(x: F64) -> F64:
+        r = r0 if radius is not None else x[3]
+        return np.asarray(np.linalg.norm(pts - x[:3], axis=1) - r)
+
+    def jacobian(x: F64) -> F64:
+        d = pts - x[:3]
         dist = np.linalg.norm(d, axis=1)
         if np.any(dist < 1e-12):
             raise SphereFitError("sphere fit: a point coincides with the centre")
         u = d / dist[:, None]
-        res = dist - r
-        jac = -u if radius is not None else np.column_stack([-u, -np.ones(len(pts))])
-        step, *_ = np.linalg.lstsq(jac, -res, rcond=None)
-        c += step[:3]
-        if radius is None:
-            r += float(step[3])
-        if float(np.linalg.norm(step)) < 1e-9:
-            break
+        return -u if radius is not None else np.column_stack([-u, -np.ones(len(pts))])
+
+    # Levenberg-Marquardt (MINPACK) on the geometric distances
+    sol = least_squares(residuals, x0, jac=jacobian, method="lm", max_nfev=iterations * 4)
+    c, r = sol.x[:3], (r0 if radius is not None else float(sol.x[3]))
     res = np.linalg.norm(pts - c, axis=1) - r
     if not (np.all(np.isfinite(c)) and r > 0):
         raise SphereFitError("sphere fit diverged")

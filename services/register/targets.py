@@ -11,8 +11,6 @@
    global placement. With its tilt known a scan needs two targets (shared with other
    scans) to be fixed; scans with fewer keep their navigation pose and are reported
    unsolved.
-
-:func:`kabsch` is the closed-form rigid fit (Umeyama without scale) for point pairs.
 """
 
 from __future__ import annotations
@@ -23,7 +21,6 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 from scipy.optimize import least_squares
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -57,25 +54,6 @@ class TargetSolution:
     n_targets: list[int]
     solved: list[bool]
     residuals: F64
-
-
-def kabsch(src: F64, dst: F64, weights: npt.ArrayLike | None = None) -> F64:
-    """4x4 rigid transform ``T`` minimising ``sum w |T src - dst|^2`` (points (N, 3),
-    N >= 3 not collinear). Raises ValueError for mismatched or too few points."""
-    a, b = np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64)
-    if a.shape != b.shape or a.ndim != 2 or a.shape[1] != 3 or len(a) < 3:
-        raise ValueError(f"kabsch needs two (N>=3, 3) point sets, got {a.shape} and {b.shape}")
-    w = np.ones(len(a)) if weights is None else np.asarray(weights, dtype=np.float64)
-    w = w / w.sum()
-    ca, cb = w @ a, w @ b
-    h = (a - ca).T @ ((b - cb) * w[:, None])
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    out = np.eye(4)
-    out[:3, :3] = r
-    out[:3, 3] = cb - r @ ca
-    return out
 
 
 def match_targets(centres: list[F64], poses: list[F64], radius: float) -> list[I64]:
