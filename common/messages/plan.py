@@ -31,7 +31,7 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     or ``grid`` (the scanner's angular grid, ``grid_step_deg`` overriding its step).
     ``coverage_target``: fraction of the coverable cells to cover; ``min_hits``: rays
     (or sample points) a candidate needs on a cell to count as seeing it.
-    ``tour``: ``auto`` | ``held-karp`` | ``cp-sat`` | ``gls``. ``pace``: how fast the
+    ``tour``: ``auto`` | ``cp-sat`` | ``gls``. ``pace``: how fast the
     survey goes, for its time estimate and the swaps it foretells
     (:class:`common.battery.Pace`). ``robots``: how many robots share the survey
     (the locations split between them, :mod:`services.planner.fleet`). ``home``:
@@ -50,7 +50,7 @@ class PlanOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     coverage_target: Annotated[float, msgspec.Meta(gt=0, le=1)] = 1.0
     min_hits: Annotated[int, msgspec.Meta(ge=1)] = 1
     cover_time_limit_s: Seconds = 30.0
-    tour: Literal["auto", "held-karp", "cp-sat", "gls"] = "auto"
+    tour: Literal["auto", "cp-sat", "gls"] = "auto"
     tour_time_limit_s: Seconds = 10.0
     open_rows: list[int] | None = None
     open_cross: list[int] | None = None

@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grid-step", type=float, default=None, metavar="DEG")
     p.add_argument("--coverage", type=float, default=1.0, help="fraction of coverable cells")
     p.add_argument("--min-hits", type=int, default=1)
-    p.add_argument("--tour", choices=["auto", "held-karp", "cp-sat", "gls"], default="auto")
+    p.add_argument("--tour", choices=["auto", "cp-sat", "gls"], default="auto")
     p.add_argument(
         "--robots", type=int, default=1, help="robots sharing the survey (the slowest first)"
     )

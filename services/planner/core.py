@@ -28,8 +28,7 @@ from services.planner.fleet import fleet
 from services.planner.route import NAV_MODES, Navigator
 from services.planner.swaps import survey_estimate, via_origin
 from services.planner.tsp import (
-    HELD_KARP_MAX,
-    held_karp,
+    circuit_cpsat,
     nearest_neighbour,
     one_tree_bound,
     solve_tour,
@@ -38,6 +37,10 @@ from services.planner.visibility import Chunks, Progress, compute_visibility
 from services.planner.waypoints import tour_legs
 
 log = logging.getLogger(__name__)
+
+
+# the paper's comparison of navigation modes is made on its fields' dozen locations
+PAPER_COMPARISON_MAX = 14
 
 
 def _cover_summary(c: Cover, method: str, greedy_count: int) -> CoverSummary:
@@ -199,10 +202,10 @@ def _tour(
     bound = None if tour.status == "optimal" else one_tree_bound(dist, tour.length)
     nn = nearest_neighbour(dist)
     by_nav: dict[str, float] = {}
-    if len(pts) <= HELD_KARP_MAX:
+    if len(pts) <= PAPER_COMPARISON_MAX:
         for mode in NAV_MODES:
             other = nav if mode == opt.nav else Navigator(fld, mode, opt.open_rows, opt.open_cross)
-            by_nav[mode] = held_karp(other.distances(pts)).length
+            by_nav[mode] = circuit_cpsat(other.distances(pts), opt.tour_time_limit_s).length
 
     def as_ids(order: list[int]) -> list[int]:
         return [0 if k == 0 else int(ids[k] or 0) for k in order] + [0]

@@ -1,8 +1,8 @@
 """Closed tours through node 0 (the start corner) over a distance matrix (metres).
 
-- :func:`held_karp`: exact dynamic programme, for up to ~14 nodes;
 - :func:`circuit_cpsat`: CP-SAT with a circuit constraint, proven optimal when it
-  finishes inside its time limit;
+  finishes inside its time limit (a field's few dozen locations: in well under a
+  second);
 - :func:`guided_local_search`: OR-Tools routing with GUIDED_LOCAL_SEARCH, for large tours;
 - :func:`nearest_neighbour`: the paper's baseline.
 
@@ -26,7 +26,6 @@ from common.arrays import F64
 
 log = logging.getLogger(__name__)
 
-HELD_KARP_MAX = 14
 CPSAT_MAX = 80
 # integer arc costs for the OR-Tools solvers, in millimetres
 _SCALE = 1000.0
@@ -82,46 +81,6 @@ def nearest_neighbour(d: F64) -> Tour:
     return Tour(
         order, tour_length(d, order), "nearest-neighbour", "heuristic", time.perf_counter() - t0
     )
-
-
-def held_karp(d: F64) -> Tour:
-    """Exact DP over subsets; raises ValueError above :data:`HELD_KARP_MAX` nodes."""
-    t0 = time.perf_counter()
-    d = _check(d)
-    n = d.shape[0]
-    if n > HELD_KARP_MAX:
-        raise ValueError(f"held_karp: {n} nodes is more than {HELD_KARP_MAX}")
-    trivial = _trivial(d, "held-karp", t0)
-    if trivial is not None:
-        return trivial
-    m = n - 1  # nodes 1..n-1 as bits 0..m-1
-    full = 1 << m
-    dp = np.full((full, m), np.inf)
-    parent = np.full((full, m), -1, dtype=np.int64)
-    dp[1 << np.arange(m), np.arange(m)] = d[0, 1:]
-    sub = d[1:, 1:]
-    for mask in range(1, full):
-        row = dp[mask]
-        for j in range(m):
-            if mask & (1 << j) or not np.isfinite(row).any():
-                continue
-            cand = row + sub[:, j]
-            k = int(np.argmin(cand))
-            nm = mask | (1 << j)
-            if cand[k] < dp[nm, j]:
-                dp[nm, j] = cand[k]
-                parent[nm, j] = k
-    last = dp[full - 1] + d[1:, 0]
-    j = int(np.argmin(last))
-    order: list[int] = []
-    mask = full - 1
-    while j >= 0:
-        order.append(j + 1)
-        pj = int(parent[mask, j])
-        mask ^= 1 << j
-        j = pj
-    order = [0, *reversed(order)]
-    return Tour(order, tour_length(d, order), "held-karp", "optimal", time.perf_counter() - t0)
 
 
 def circuit_cpsat(
@@ -280,17 +239,15 @@ def _held_karp_bound(w0: F64, upper: float, iterations: int) -> float:  # pragma
 
 
 def solve_tour(d: F64, method: str = "auto", time_limit_s: float = 10.0) -> Tour:
-    """Best tour by ``method``: ``"held-karp"``, ``"cp-sat"``, ``"gls"`` or ``"auto"``
-    (Held-Karp up to 14 nodes, CP-SAT up to 80 falling back to GLS if it cannot prove
-    optimality, GLS beyond). Raises ValueError on an unknown method."""
+    """Best tour by ``method``: ``"cp-sat"``, ``"gls"`` or ``"auto"`` (CP-SAT up to 80
+    nodes, falling back to GLS if it finds no tour in time, GLS beyond). Raises
+    ValueError on an unknown method."""
     d = _check(d)
     n = d.shape[0]
-    if method == "held-karp" or (method == "auto" and n <= HELD_KARP_MAX):
-        return held_karp(d)
     if method == "gls" or (method == "auto" and n > CPSAT_MAX):
         return guided_local_search(d, time_limit_s)
     if method not in ("cp-sat", "auto"):
-        raise ValueError(f"tour method {method!r}: expected auto, held-karp, cp-sat or gls")
+        raise ValueError(f"tour method {method!r}: expected auto, cp-sat or gls")
     nn = nearest_neighbour(d)
     try:
         tour = circuit_cpsat(d, time_limit_s, hint=nn.order)
