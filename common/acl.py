@@ -90,8 +90,13 @@ def _keys(*items: keys.Topic[Any] | keys.Rpc[Any, Any]) -> tuple[str, ...]:
     return tuple(e for i in items for e in _scoped(i.key))
 
 
-# what every machine may send besides its role's grants: heartbeats and pings
-EVERYONE = Grants(publishes=_keys(keys.HEALTH), calls=_keys(keys.PING), serves=_keys(keys.PING))
+# what every machine may send besides its role's grants: heartbeats, pings and the
+# configurations services run with (a mission records them all)
+EVERYONE = Grants(
+    publishes=_keys(keys.HEALTH),
+    calls=_keys(keys.PING, keys.CONFIG),
+    serves=_keys(keys.PING, keys.CONFIG),
+)
 
 # History topics (common.keys.Topic.history) also travel under ``<key>/@adv/...``: the
 # publisher's heartbeats, cache queryable and liveliness token (``@adv/pub``), the

@@ -91,6 +91,9 @@ ALIVE_ALL = _k("alive/**")
 
 HEALTH = Topic(_k("health/{service}"), system.Health)
 PING = Rpc[system.Ping, system.Pong](_k("rpc/{service}/ping"), system.Ping, system.Pong)
+CONFIG = Rpc[system.ConfigQuery, system.ServiceConfig](
+    _k("rpc/{service}/config"), system.ConfigQuery, system.ServiceConfig
+)
 
 SIM_CLOCK = Topic(_k("sim/clock"), sim.SimClock, control=True)
 # lockstep (common/lockstep.py): each participant's acknowledgement of a step, and
@@ -214,6 +217,7 @@ RPCS: dict[str, tuple[Any, type]] = {
     r.key: (r.request, r.reply)
     for r in (
         PING,
+        CONFIG,
         NAV_CMD,
         SCANNER_CMD,
         MISSION_CMD,

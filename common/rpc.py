@@ -86,6 +86,22 @@ def answer(
 ZENOH_TIMEOUT = "Timeout"
 
 
+def good_replies(
+    replies: Iterable[zenoh.Reply], rpc: Rpc[Q, R], dropped: Callable[[str, Exception], None]
+) -> list[R]:
+    """Every good reply of ``replies`` to a query on ``rpc``, in order; error replies
+    are left out and undecodable ones given to ``dropped``."""
+    out: list[R] = []
+    for reply in replies:
+        if reply.ok is None:
+            continue
+        try:
+            out.append(decode(reply.ok.payload.to_bytes(), rpc.reply))
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            dropped(rpc.key, exc)
+    return out
+
+
 def first_reply(replies: Iterable[zenoh.Reply], rpc: Rpc[Q, R], timeout: float) -> R:
     """The first of ``replies`` to a call on ``rpc``. Raises RpcError with the
     service's reason on an error reply, RpcTimeout when there is none."""

@@ -3,7 +3,8 @@
 It gives each service the same command line (``--manifest``, ``--config``,
 ``--set key=value``, ``--dump-config``), logging, SIGTERM/SIGINT -> stop, one Zenoh
 session, a liveliness token (``alive/<machine>/<service>/<pid>/<since_ns>``), a
-``health/<service>`` heartbeat and a ping RPC. The service itself is built by
+``health/<service>`` heartbeat, a ping RPC and one answering with its resolved
+configuration (``rpc/<service>/config``). The service itself is built by
 ``build(ctx, cfg)`` and only implements ``run(stop)``. The command line and the
 config are resolved first (:mod:`common.service_args`), then the service is served
 (:func:`serve`).
@@ -28,10 +29,10 @@ import zenoh
 
 from common import keys
 from common.clock import Clock
-from common.config import ConfigError, zenoh_config
+from common.config import ConfigError, dump_toml, zenoh_config
 from common.field import FieldError
 from common.lockstep import Inbox, LockstepClock
-from common.messages.system import Health, Pong
+from common.messages.system import Health, Pong, ServiceConfig
 from common.robot import Robot, default_robot
 from common.service_args import EXIT_CONFIG, CliOptions, Launch, parse
 from common.service_clock import Lockstep, service_clock
@@ -120,6 +121,8 @@ def serve(launch: Launch[C], build: Callable[[Context, C], Service], lockstep: L
         inbox if lockstep == "world" else None,
     )
     bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text))
+    resolved = ServiceConfig(service=name, machine=launch.machine, toml=dump_toml(launch.cfg))
+    bus.serve(keys.CONFIG.at(service=name), lambda _: resolved)
     health = threading.Thread(
         target=_heartbeat, args=(bus, name, launch.machine, since_ns, stop), daemon=True
     )

@@ -32,7 +32,7 @@ from common.lockstep import (
     caller_time,
     parse_attachment,
 )
-from common.rpc import RequestError, RpcError, RpcTimeout, answer, first_reply
+from common.rpc import RequestError, RpcError, RpcTimeout, answer, first_reply, good_replies
 from common.streams import Latest, Publisher, declare_publisher, key_intersects
 
 __all__ = ["Bus", "Latest", "Publisher", "RequestError", "RpcError", "RpcTimeout", "key_intersects"]
@@ -193,6 +193,16 @@ class Bus:
             timeout = max(timeout, self._clock.deadline_s)
         replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
         return first_reply(replies, rpc, timeout)
+
+    def gather(self, rpc: Rpc[Q, R], request: Q, timeout: float = 2.0) -> list[R]:
+        """Send ``request`` to every service answering ``rpc`` (a key with wildcards,
+        such as ``rpc/*/config``) and return each good reply, as they came within
+        ``timeout`` seconds; error and undecodable replies are left out."""
+        rpc = rpc.within(self.namespace)
+        every = zenoh.QueryTarget.ALL, zenoh.ConsolidationMode.NONE
+        replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout,
+                                   target=every[0], consolidation=every[1])  # fmt: skip
+        return good_replies(replies, rpc, self._dropped)
 
     def watch_alive(self, callback: Callable[[str, bool], object]) -> None:
         """Call ``callback(token_key, alive)`` for every service's liveliness token

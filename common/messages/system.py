@@ -7,6 +7,20 @@ import msgspec
 from common.messages.core import Message, NonNegative
 
 
+class ConfigQuery(Message, frozen=True, kw_only=True):
+    """Ask a service for the configuration it runs with (``rpc/<service>/config``)."""
+
+
+class ServiceConfig(Message, frozen=True, kw_only=True):
+    """A service's configuration as it resolved it (its manifest section, ``--set``
+    overrides and the defaults of everything not given), as TOML: what
+    ``--dump-config`` prints."""
+
+    service: str
+    machine: str
+    toml: str
+
+
 class Health(Message, frozen=True, kw_only=True):
     """Published once a second by every service on ``health/<service>``.
 

@@ -30,6 +30,7 @@ from common.service import Context
 from common.transport import RequestError, RpcError
 from services.mission.battery import BatteryWatch
 from services.mission.config import MissionConfig
+from services.mission.configs import save_configs
 from services.mission.feeds import Aborted, Feeds
 from services.mission.lanes import Lanes
 from services.mission.log import MissionLog
@@ -237,6 +238,7 @@ class MissionService:
             if not clock_started(self.ctx.clock, self._wake, self.ctx.log):
                 raise Aborted
             assert self.plan is not None
+            save_configs(self.ctx.bus, self.ctx.run_dir / str(self.mission), self.event)
             battery = BatteryWatch(self, sv, self.cfg, self.plan, self.ctx.robot.battery)
             walk(self, log, sv, self.cfg, segs, self._wake, battery)
             if self.cfg.return_to_origin:

@@ -11,6 +11,7 @@ import re
 import signal
 import subprocess
 import sys
+import tomllib
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -235,6 +236,14 @@ def test_complete_mission_with_pause_and_resume_from_another_process(
     arrivals = [t for _, _, t in log.events() if ": arrived: " in t]
     assert len(arrivals) >= 3 and all("off the planned pose" in t for t in arrivals), arrivals
     assert sorted(d.scans_started()) == [1, 2, 3]
+    # the configuration every service resolved is saved with the mission: what the
+    # manifest set, what the defaults filled in, and where each ran
+    saved = tomllib.loads((d.runs / s.mission / "config.toml").read_text())
+    assert set(saved["services"]) >= {"sim", "gnss", "base", "scanner", "nav", "planner", "mission"}
+    assert saved["services"]["mission"]["settle_s"] == 1.0  # the manifest's
+    assert saved["services"]["mission"]["scan_retries"] == 2  # the default
+    assert saved["services"]["scanner"]["sim_scan_time_s"] == 20.0
+    assert saved["machines"]["nav"] == "test"
 
 
 # a scanner failing scan 2 (both attempts), and the dashboard saving one .rrd per mission
