@@ -48,6 +48,8 @@ class PlannerService:
         self._cache: collections.OrderedDict[str, PlanResult] = collections.OrderedDict()
         self._inflight: dict[str, Future[PlanResult]] = {}
         ctx.bus.serve(keys.PLANNER_PLAN, self.handle)
+        # plans being computed now, in the heartbeat (a plan takes seconds to minutes)
+        ctx.bus.report("plans_computing", lambda: len(self._inflight))
 
     def handle(self, req: PlanRequest) -> PlanResult:
         try:  # fail fast, in this process, on a bad, forbidden or too large field
