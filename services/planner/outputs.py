@@ -25,7 +25,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from common.arrays import F64
 from common.field_geojson import field_to_wgs84
-from common.files import atomic_write
+from common.files import atomic_write, write_atomic
 from common.messages.nav import Leg
 from common.messages.plan import PlanResult
 from services.planner.waypoints import heading
@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 def write_json(result: PlanResult, path: Path) -> Path:
     """The whole result, decodable with ``msgspec.json.decode(data, type=PlanResult)``."""
     data = msgspec.json.format(msgspec.json.encode(result), indent=1)
-    atomic_write(path, lambda tmp: tmp.write_bytes(data))
+    write_atomic(path, data)
     return path
 
 
@@ -122,7 +122,7 @@ def write_geojson(result: PlanResult, path: Path) -> Path:
     if not geo:
         doc["frame"] = "field"
     data = msgspec.json.encode(doc)
-    atomic_write(path, lambda tmp: tmp.write_bytes(data))
+    write_atomic(path, data)
     return path
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from common.canopy import BOOK_COLUMNS, TRAITS, column
 from common.config import dump_toml
-from common.files import atomic_write
+from common.files import atomic_write, write_atomic
 from services.traits.compute import NAMES, RunTraits, TraitTable
 from services.traits.config import TraitsConfig
 from services.traits.run import Record
@@ -42,11 +42,6 @@ BOOK = BOOK_COLUMNS
 # decimals per unit: mm for heights, 0.1 L for volumes, 0.001 for shares
 DECIMALS = {"m": 3, "m3": 4, "1": 3}
 COUNTS = ("points",)
-
-
-def text_of(content: str) -> Callable[[Path], object]:
-    """A writer of ``content`` as UTF-8 text, for :func:`common.files.atomic_write`."""
-    return lambda p: p.write_text(content, encoding="utf-8")
 
 
 def rounded(trait: str, v: float) -> float | int | None:
@@ -177,7 +172,7 @@ def write_outputs(
         "traits.geojson": json.dumps(geojson(rt), indent=1, allow_nan=False),
     }
     for name, text in files.items():
-        atomic_write(out / name, text_of(text))
+        write_atomic(out / name, text.encode())
     names = list(files)
     if cfg.figures:
         from services.traits.fieldmap import draw
@@ -193,12 +188,12 @@ def write_outputs(
 
     fitted = None
     if breeding.has_entries(t):
-        atomic_write(out / "entries.csv", text_of(breeding.entries_csv(t)))
+        write_atomic(out / "entries.csv", breeding.entries_csv(t).encode())
         fitted = breeding.heritabilities(t) if h2 is None else h2()
-        atomic_write(out / "heritability.csv", text_of(breeding.heritability_csv(fitted)))
+        write_atomic(out / "heritability.csv", breeding.heritability_csv(fitted).encode())
         names += ["entries.csv", "heritability.csv"]
-    atomic_write(out / "traits.md", text_of(breeding.report(rt, fitted)))
+    write_atomic(out / "traits.md", breeding.report(rt, fitted).encode())
     names.append("traits.md")
-    atomic_write(out / "traits.toml", text_of(options_toml(rt, cfg)))
+    write_atomic(out / "traits.toml", options_toml(rt, cfg).encode())
     names.append("traits.toml")
     return names

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from common.canopy import column
-from common.files import atomic_write
+from common.files import write_atomic
 from services.traits.compute import NAMES
-from services.traits.outputs import BOOK, book, cell, text_of
+from services.traits.outputs import BOOK, book, cell
 from services.traits.series import Season
 from services.traits.stats import Heritability, heritability
 
@@ -130,7 +130,7 @@ def write_season(s: Season, out: Path, figures: bool = True) -> list[str]:
     if s.fits:
         files["growth_fits.csv"] = fits_csv(s)
     for name, text in files.items():
-        atomic_write(out / name, text_of(text))
+        write_atomic(out / name, text.encode())
     names = list(files)
     if figures:
         from services.traits.growth_figure import growth_figure
