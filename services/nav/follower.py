@@ -61,13 +61,11 @@ class Follower:
         """Follow ``legs`` until ``lease_until`` (seconds, the clock of :meth:`step`)
         unless renewed; with ``join``, start on the first leg passing within
         ``join_distance_m`` of the robot, decided at the first localized step (a
-        restarted navigation is not localized yet when the route is sent again). The route
+        restarted navigation is not localized yet when the route is sent again). It
         has arrived only within ``arrival_tolerance_m`` of its end (the route's own)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
-        self.lease_until = lease_until
-        self._join = join
-        self.arrival_tolerance_m = arrival_tolerance_m
-        self.end_detail = ""
+        self.lease_until, self._join = lease_until, join
+        self.arrival_tolerance_m, self.end_detail = arrival_tolerance_m, ""
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
         self.fine = Fine(self.cfg)
