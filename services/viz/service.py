@@ -35,7 +35,7 @@ from services.viz import clouds, scene, traits_view
 from services.viz.cells import plan_cells
 from services.viz.config import VizConfig
 from services.viz.fleet_view import FleetView
-from services.viz.outputs import Outputs
+from services.viz.outputs import Outputs, live_recording_id
 
 # a robot slower than this (m/s, rad/s) stands where its last scan was taken
 STILL = 0.01
@@ -59,7 +59,8 @@ LATEST: dict[str, Topic[Any]] = {
 class VizService:
     def __init__(self, ctx: Context, cfg: VizConfig) -> None:
         self.ctx, self.cfg, self.log = ctx, cfg, ctx.log
-        self.out = Outputs(cfg, ctx.run_dir, isinstance(ctx.clock, SimClock))
+        rec_id = live_recording_id(ctx.machine, os.getpid())
+        self.out = Outputs(cfg, ctx.run_dir, isinstance(ctx.clock, SimClock), rec_id)
         self.frame = self._frame_of_field(ctx.field)
         self.static: dict[str, scene.Entry] = {e.path: e for e in scene.world(ctx.robot)}
         self.trail = scene.Trail(cfg.trail_step_m)
