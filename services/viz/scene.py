@@ -7,8 +7,8 @@ z up):
 - ``field/plots``, ``field/cells`` (coloured by how many selected scans see them),
   ``field/candidates``, ``field/selected``
 - ``route/legs``
-- ``robot/estimate`` and ``robot/truth`` (transforms with a body box below them),
-  ``robot/estimate/lidar``, ``robot/trail/<k>`` (coloured by cross-track error)
+- ``robot/estimate`` (a transform with a body box below it), ``robot/estimate/lidar``,
+  ``robot/trail/<k>`` (coloured by cross-track error)
 - ``gnss/fix1``, ``gnss/fix2``, ``gnss/heading``
 - ``errors/cross_track_m``, ``errors/heading_deg``; ``mission/log``,
   ``mission/scans_done``; ``scanner/log``, ``scanner/progress``
@@ -100,11 +100,10 @@ def body(path: str, robot: Robot, colour: tuple[int, ...], solid: bool = False) 
 
 
 def world(robot: Robot) -> list[Entry]:
-    """What never changes: the up axis and the two robot bodies."""
+    """What never changes: the up axis and the robot's body under its estimate."""
     return [
         Entry("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True),
         body("robot/estimate/body", robot, BLUE),
-        body("robot/truth/body", robot, (*GREY, 90), solid=True),
     ]
 
 

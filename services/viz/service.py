@@ -4,7 +4,9 @@ Subscription callbacks only store the newest message of each stream (events and
 finished scans are queued, they are rare); a loop at ``rate_hz`` wall time logs what
 is new. So the dashboard reads the bus at any rate without ever holding a Zenoh
 thread, and a slow viewer or disk costs visual frames, never messages to others: it
-subscribes to no control topic and publishes nothing but its health. Point clouds
+subscribes to no control topic and publishes nothing but its health. It shows what
+the robot knows; in simulation the true pose is added to the served recording by the
+evaluation layer (:mod:`phenorover.eval.truth_view`), never read here. Point clouds
 and the cells' view counts are computed on a low-priority worker thread.
 """
 
@@ -43,7 +45,6 @@ STILL = 0.01
 # streams whose newest message is all the dashboard needs
 LATEST: dict[str, Topic[Any]] = {
     "pose": keys.NAV_POSE,
-    "truth": keys.SIM_TRUTH,
     "progress": keys.NAV_PROGRESS,
     "fix1": keys.GNSS_FIX.at(antenna=1),
     "fix2": keys.GNSS_FIX.at(antenna=2),
@@ -181,8 +182,6 @@ class VizService:
             log(m.stamp_ns, [scene.pose("robot/estimate", m.x, m.y, m.z, m.yaw)])
             log(m.stamp_ns, self.trail.add(m.x, m.y, cte))
             self._last_pose = m
-        elif name == "truth":
-            log(m.stamp_ns, [scene.pose("robot/truth", m.x, m.y, m.z, m.yaw)])
         elif name == "progress":
             self._last_progress = m
             log(m.stamp_ns, scene.progress_entries(m))
