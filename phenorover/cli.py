@@ -25,6 +25,7 @@ from common.status import format_table, query_alive
 from phenorover.cpu import CpuUse, Mark
 
 if TYPE_CHECKING:
+    from common.messages.mission import MissionState
     from common.messages.sim import SimClock
     from common.streams import Latest
     from common.transport import Bus
@@ -104,8 +105,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     from common import keys
     from common.messages.sim import SimRun
     from common.transport import Bus
+    from phenorover.eval.truth_view import beside
     from phenorover.launcher import Launcher
-    from services.mission.cli import describe, run_survey
+    from services.mission.cli import run_survey
 
     field = args.field or None
     if field and Path(field).exists():  # one file for every service, whatever its cwd
@@ -125,7 +127,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
         print(note, flush=True)
     wanted = set(launcher.children)
     t0 = time.monotonic()
-    with launcher, open_client(args.manifest, []) as session:
+    # the served dashboard shows the robot's estimate; the simulator's truth is added
+    # to its recording by the evaluation's overlay
+    with (
+        launcher,
+        open_client(args.manifest, []) as session,
+        beside(args.manifest, launcher.manifest),
+    ):
         alive = wait_alive(session, wanted, timeout=args.timeout)
         print(format_table(alive.seen), flush=True)
         if not alive:
@@ -151,26 +159,30 @@ def cmd_sim(args: argparse.Namespace) -> int:
                 final = wait_registration(bus, final, args.register_timeout)
         finally:
             bus.close()
-        wall = time.monotonic() - t0
         if final is None:
             return 1
+        return _verdict(final, problems, Path(launcher.manifest.run_dir), time.monotonic() - t0)
+
+
+def _verdict(final: MissionState, problems: list[str], run_dir: Path, wall: float) -> int:
+    """The survey's summary line, what went wrong on stderr; ``phenorover sim``'s exit
+    status (0: every location scanned, else 1)."""
+    from services.mission.cli import describe
+
+    print(f"summary: {describe(final)}; wall {wall:.0f} s; files in {run_dir / final.mission}")
+    complete = final.scans_done == final.scans_total and final.scans_failed == 0
+    if final.phase.value == "done" and complete:
+        return 0
+    for text in problems:
+        print(f"phenorover sim: {text}", file=sys.stderr)
+    if not complete:
         print(
-            f"summary: {describe(final)}; wall {wall:.0f} s; files in "
-            f"{Path(launcher.manifest.run_dir) / final.mission}"
+            f"phenorover sim: {final.scans_total - final.scans_done} of "
+            f"{final.scans_total} locations not scanned (mission.db in "
+            f"{run_dir / final.mission})",
+            file=sys.stderr,
         )
-        complete = final.scans_done == final.scans_total and final.scans_failed == 0
-        if final.phase.value == "done" and complete:
-            return 0
-        for text in problems:
-            print(f"phenorover sim: {text}", file=sys.stderr)
-        if not complete:
-            print(
-                f"phenorover sim: {final.scans_total - final.scans_done} of "
-                f"{final.scans_total} locations not scanned (mission.db in "
-                f"{Path(launcher.manifest.run_dir) / final.mission})",
-                file=sys.stderr,
-            )
-        return 1
+    return 1
 
 
 def _idle(bus: Bus) -> None:

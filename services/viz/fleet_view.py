@@ -1,10 +1,11 @@
 """Several robots on one dashboard: each robot of ``[services.viz] robots`` (their
 namespaces, :mod:`common.keys`) under ``fleet/<namespace>/``: its pose by its own
-estimate and, in simulation, the truth; its share of the survey (the route its
-mission follows, in a colour of its own); its mission's state, scans done and events.
-The field and the candidates come from the first plan any robot publishes, each
-robot's locations from its own. Like the rest of the dashboard it stores the newest message of each
-stream from the bus and draws on the service's tick."""
+estimate (in simulation :mod:`phenorover.eval.truth_view` adds the truth beside it);
+its share of the survey (the route its mission follows, in a colour of its own); its
+mission's state, scans done and events. The field and the candidates come from the
+first plan any robot publishes, each robot's locations from its own. Like the rest of
+the dashboard it stores the newest message of each stream from the bus and draws on
+the service's tick."""
 
 from __future__ import annotations
 
@@ -28,7 +29,6 @@ from services.viz.scene import Entry
 COLOURS = [(255, 140, 0), (60, 130, 255), (200, 60, 200), (40, 200, 170), (230, 40, 40)]
 STREAMS: dict[str, Topic[Any]] = {
     "pose": keys.NAV_POSE,
-    "truth": keys.SIM_TRUTH,
     "state": keys.MISSION_STATE,
     "plan": keys.MISSION_PLAN,
 }
@@ -81,8 +81,6 @@ class FleetView:
             self._on_plan(ns, m)
         elif name == "pose":
             self._log(m.stamp_ns, [scene.pose(f"{base}/estimate", m.x, m.y, m.z, m.yaw)])
-        elif name == "truth":
-            self._log(m.stamp_ns, [scene.pose(f"{base}/truth", m.x, m.y, m.z, m.yaw)])
         elif name == "state":
             prev = self.states.get(ns)
             self.states[ns] = m

@@ -1,7 +1,10 @@
 """Where the dashboard's data goes: rerun recording streams and their sinks.
 
 One *live* stream for the service's lifetime feeds the gRPC server (and the web
-viewer), a viewer we connect to, and a fixed ``save`` path. A ``save`` path holding
+viewer), a viewer we connect to, and a fixed ``save`` path. Its recording id is
+:func:`live_recording_id` of the service's machine and process, both in its liveliness
+token, so another process that sees the token can log into the same served recording
+(rerun merges data by application and recording id). A ``save`` path holding
 ``{mission}`` gets a stream of its own per mission, opened when the mission starts
 and closed (footer written) when the next starts or the service stops.
 
@@ -39,6 +42,27 @@ TIMELINE = "time"
 LOCAL = {"0.0.0.0": "127.0.0.1", "::": "::1"}
 
 log = logging.getLogger("viz")
+
+
+def live_recording_id(machine: str, pid: int) -> str:
+    """The live stream's recording id of the dashboard running as ``pid`` on ``machine``
+    (its liveliness token: ``alive/<machine>/viz/<pid>/...``): a restarted dashboard
+    starts a recording of its own, as a new process."""
+    return f"{APP_ID}-live-{machine}-{pid}"
+
+
+def local_url(cfg: VizConfig) -> str:
+    """The served gRPC endpoint as a process on this machine reaches it."""
+    return f"rerun+http://{LOCAL.get(cfg.bind, cfg.bind)}:{cfg.grpc_port}/proxy"
+
+
+def set_time(rec: rr.RecordingStream, stamp_ns: int, sim_time: bool) -> None:
+    """Put ``rec`` at ``stamp_ns`` on the one timeline: sim time as a duration from the
+    world's start, otherwise wall time as a timestamp."""
+    if sim_time:
+        rec.set_time(TIMELINE, duration=stamp_ns * 1e-9)
+    else:
+        rec.set_time(TIMELINE, timestamp=stamp_ns * 1e-9)
 
 
 def port_free(host: str, port: int) -> bool:
@@ -155,8 +179,12 @@ def save_path(template: str, run_dir: Path, mission: str) -> Path:
 
 
 class Outputs:
-    def __init__(self, cfg: VizConfig, run_dir: Path, sim_time: bool) -> None:
+    def __init__(
+        self, cfg: VizConfig, run_dir: Path, sim_time: bool, recording_id: str | None = None
+    ) -> None:
+        """``recording_id``: the live stream's (None: a random one)."""
         self.cfg, self.run_dir, self.sim_time = cfg, run_dir, sim_time
+        self.recording_id = recording_id
         self.per_mission = "{mission}" in cfg.save
         self.live: rr.RecordingStream | None = None
         self.mission_stream: rr.RecordingStream | None = None
@@ -190,7 +218,9 @@ class Outputs:
             sinks.append(rr.FileSink(path))
             log.info("viz: saving to %s", path)
         if sinks:
-            self.live = rr.RecordingStream(APP_ID, send_properties=True)
+            self.live = rr.RecordingStream(
+                APP_ID, recording_id=self.recording_id, send_properties=True
+            )
             self.live.set_sinks(*sinks, default_blueprint=blueprint())
 
     def _serve_web(self, grpc_uri: str) -> None:
@@ -234,10 +264,7 @@ class Outputs:
         if not items:
             return
         for rec in self.streams():
-            if self.sim_time:
-                rec.set_time(TIMELINE, duration=stamp_ns * 1e-9)
-            else:
-                rec.set_time(TIMELINE, timestamp=stamp_ns * 1e-9)
+            set_time(rec, stamp_ns, self.sim_time)
             for e in items:
                 rec.log(e.path, e.item, static=e.static)
 

@@ -7,8 +7,8 @@ z up):
 - ``field/plots``, ``field/cells`` (coloured by how many selected scans see them),
   ``field/candidates``, ``field/selected``
 - ``route/legs``
-- ``robot/estimate`` and ``robot/truth`` (transforms with a body box below them),
-  ``robot/estimate/lidar``, ``robot/trail/<k>`` (coloured by cross-track error)
+- ``robot/estimate`` (a transform with a body box below it), ``robot/estimate/lidar``,
+  ``robot/trail/<k>`` (coloured by cross-track error)
 - ``gnss/fix1``, ``gnss/fix2``, ``gnss/heading``
 - ``errors/cross_track_m``, ``errors/heading_deg``; ``mission/log``,
   ``mission/scans_done``; ``scanner/log``, ``scanner/progress``
@@ -85,24 +85,25 @@ def blueprint() -> Any:
     )
 
 
-def world(robot: Robot) -> list[Entry]:
-    """What never changes: the up axis and the two robot bodies (``robot``'s
-    footprint, standing on the ground under base_link)."""
+def body(path: str, robot: Robot, colour: tuple[int, ...], solid: bool = False) -> Entry:
+    """``robot``'s footprint as a box standing on the ground under the transform at
+    ``path``'s parent (static)."""
     fp = robot.footprint
-    half = (fp.length / 2, fp.width / 2, fp.height / 2)
-    centre = [[0.0, 0.0, half[2]]]
+    half = [[fp.length / 2, fp.width / 2, fp.height / 2]]
+    box = rr.Boxes3D(
+        half_sizes=half,
+        centers=[[0.0, 0.0, fp.height / 2]],
+        colors=[colour],
+        fill_mode="solid" if solid else None,
+    )
+    return Entry(path, box, static=True)
+
+
+def world(robot: Robot) -> list[Entry]:
+    """What never changes: the up axis and the robot's body under its estimate."""
     return [
         Entry("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True),
-        Entry(
-            "robot/estimate/body",
-            rr.Boxes3D(half_sizes=[half], centers=centre, colors=[BLUE]),
-            static=True,
-        ),
-        Entry(
-            "robot/truth/body",
-            rr.Boxes3D(half_sizes=[half], centers=centre, colors=[(*GREY, 90)], fill_mode="solid"),
-            static=True,
-        ),
+        body("robot/estimate/body", robot, BLUE),
     ]
 
 

@@ -4,7 +4,9 @@ Subscription callbacks only store the newest message of each stream (events and
 finished scans are queued, they are rare); a loop at ``rate_hz`` wall time logs what
 is new. So the dashboard reads the bus at any rate without ever holding a Zenoh
 thread, and a slow viewer or disk costs visual frames, never messages to others: it
-subscribes to no control topic and publishes nothing but its health. Point clouds
+subscribes to no control topic and publishes nothing but its health. It shows what
+the robot knows; in simulation the true pose is added to the served recording by the
+evaluation layer (:mod:`phenorover.eval.truth_view`), never read here. Point clouds
 and the cells' view counts are computed on a low-priority worker thread.
 """
 
@@ -35,7 +37,7 @@ from services.viz import clouds, scene, traits_view
 from services.viz.cells import plan_cells
 from services.viz.config import VizConfig
 from services.viz.fleet_view import FleetView
-from services.viz.outputs import Outputs
+from services.viz.outputs import Outputs, live_recording_id
 
 # a robot slower than this (m/s, rad/s) stands where its last scan was taken
 STILL = 0.01
@@ -43,7 +45,6 @@ STILL = 0.01
 # streams whose newest message is all the dashboard needs
 LATEST: dict[str, Topic[Any]] = {
     "pose": keys.NAV_POSE,
-    "truth": keys.SIM_TRUTH,
     "progress": keys.NAV_PROGRESS,
     "fix1": keys.GNSS_FIX.at(antenna=1),
     "fix2": keys.GNSS_FIX.at(antenna=2),
@@ -59,7 +60,8 @@ LATEST: dict[str, Topic[Any]] = {
 class VizService:
     def __init__(self, ctx: Context, cfg: VizConfig) -> None:
         self.ctx, self.cfg, self.log = ctx, cfg, ctx.log
-        self.out = Outputs(cfg, ctx.run_dir, isinstance(ctx.clock, SimClock))
+        rec_id = live_recording_id(ctx.machine, os.getpid())
+        self.out = Outputs(cfg, ctx.run_dir, isinstance(ctx.clock, SimClock), rec_id)
         self.frame = self._frame_of_field(ctx.field)
         self.static: dict[str, scene.Entry] = {e.path: e for e in scene.world(ctx.robot)}
         self.trail = scene.Trail(cfg.trail_step_m)
@@ -180,8 +182,6 @@ class VizService:
             log(m.stamp_ns, [scene.pose("robot/estimate", m.x, m.y, m.z, m.yaw)])
             log(m.stamp_ns, self.trail.add(m.x, m.y, cte))
             self._last_pose = m
-        elif name == "truth":
-            log(m.stamp_ns, [scene.pose("robot/truth", m.x, m.y, m.z, m.yaw)])
         elif name == "progress":
             self._last_progress = m
             log(m.stamp_ns, scene.progress_entries(m))

@@ -286,7 +286,6 @@ def test_failing_scanner_marks_the_location_failed_and_the_recording_holds_the_r
         "/route/legs",
         "/robot/estimate",
         "/robot/estimate/body",
-        "/robot/truth",
         "/robot/trail/0000",
         "/gnss/fix1",
         "/gnss/fix2",
@@ -298,6 +297,8 @@ def test_failing_scanner_marks_the_location_failed_and_the_recording_holds_the_r
     }
     assert expected <= paths, f"missing {sorted(expected - paths)}; have {sorted(paths)}"
     assert "/clouds/scan_002" not in paths  # the failed location has no cloud
+    # what the robot knows: the simulator's truth is the evaluation's to draw
+    assert not [p for p in paths if "truth" in p]
 
 
 def true_stops(d: Deployment, mission: str, truth: list[TruthPose]) -> list[float]:

@@ -12,7 +12,6 @@ from common import keys
 from common.messages.mission import MissionEvent, MissionPhase, MissionState
 from common.messages.nav import PoseEstimate
 from common.messages.plan import PlanResult
-from common.messages.sim import TruthPose
 from common.robot import default_robot
 from common.transport import Bus
 from services.viz.fleet_view import FleetView
@@ -43,12 +42,13 @@ def test_each_robot_is_drawn_under_its_namespace(split: PlanResult) -> None:
         logged.extend(entries)
 
     view = FleetView(cast(Bus, bus), ["r1", "r2"], default_robot(), log, static.extend)
-    # nothing of the robot surveying alone (the plain keys) is listened to
+    # nothing of the robot surveying alone (the plain keys) is listened to, and no
+    # robot's truth (the evaluation draws it: phenorover.eval.truth_view)
     assert keys.NAV_POSE.key not in bus.subs
+    assert not [k for k in bus.subs if "sim/" in k]
     for k, ns in enumerate(("r1", "r2"), start=1):
         bus.subs[keys.MISSION_PLAN.within(ns).key](split.share_of(k))
         bus.subs[keys.NAV_POSE.within(ns).key](PoseEstimate(stamp_ns=1, x=float(k), y=2.0, yaw=0.0))
-        bus.subs[keys.SIM_TRUTH.within(ns).key](TruthPose(stamp_ns=1, x=float(k), y=2.0, z=0.0))
         state = MissionState(mission=f"m{k}", phase=MissionPhase.DRIVING, scans_total=5)
         bus.subs[keys.MISSION_STATE.within(ns).key](state)
         event = MissionEvent(mission=f"m{k}", level="info", text="hi")
@@ -56,7 +56,7 @@ def test_each_robot_is_drawn_under_its_namespace(split: PlanResult) -> None:
     view.tick()
     paths = {e.path for e in logged}
     for ns in ("r1", "r2"):
-        assert {f"fleet/{ns}/estimate", f"fleet/{ns}/truth", f"fleet/{ns}/log"} <= paths
+        assert {f"fleet/{ns}/estimate", f"fleet/{ns}/log"} <= paths
         assert f"fleet/{ns}/scans_done" in paths
     drawn = [e.path for e in static]
     assert drawn.count("field/plots") == 1  # once, whoever's plan came first
