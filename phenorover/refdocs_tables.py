@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import functools
 import inspect
+import math
 import re
 import sys
 from typing import Any
@@ -54,12 +55,17 @@ def field_docs(cls: type) -> dict[str, str]:
 
 
 def number(v: float) -> str:
-    if isinstance(v, float) and v.is_integer() and abs(v) < 1e6:
+    """``60``, ``0.05``, ``2e9``: a whole number as an integer, a large round one with an
+    exponent."""
+    if not math.isfinite(v):
+        return "inf" if v > 0 else "-inf" if v < 0 else "nan"
+    if v == int(v) and abs(v) < 1e6:
         return str(int(v))
-    if isinstance(v, float) and v.is_integer():
-        mant, _, exp = f"{v:.3g}".partition("e+")
+    short = f"{v:.3g}"
+    if v == int(v) and float(short) == v:
+        mant, _, exp = short.partition("e+")
         return f"{mant}e{int(exp)}" if exp else mant
-    return repr(v) if isinstance(v, float) else str(v)
+    return repr(v)
 
 
 def toml(v: Any) -> str:
@@ -120,7 +126,8 @@ def type_cell(t: Any) -> str:
     if isinstance(t, mi.TupleType):
         return "[" + ", ".join(type_cell(x) for x in t.item_types) + "]"
     if isinstance(t, mi.DictType):
-        return "table of " + type_cell(t.value_type)
+        inner = "any" if isinstance(t.value_type, mi.DictType) else type_cell(t.value_type)
+        return "table" + ("" if inner == "any" else f" of {inner}")
     simple = {mi.BoolType: "bool", mi.StrType: "text", mi.StructType: "table"}
     simple |= {mi.DateType: "date", mi.AnyType: "any"}
     return next((name for kind, name in simple.items() if isinstance(t, kind)), "value")
