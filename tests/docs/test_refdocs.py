@@ -26,7 +26,6 @@ ROOTS = (
 # it may only shrink: convert one, take it out
 PENDING = {
     "common.battery.Battery",
-    "common.canopy.CanopyDefinition",
     "common.field_geojson.GeoSettings",
     "common.field_model.FieldLayout",
     "common.field_model.PlotRecord",
@@ -71,8 +70,6 @@ PENDING = {
     "services.sim.world.CylinderObstacle",
     "services.sim.world.SoilZone",
     "services.sim.world.WorldConfig",
-    "services.traits.config.GroundConfig",
-    "services.traits.config.TraitsConfig",
     "services.viz.config.VizConfig",
 }
 
