@@ -93,7 +93,7 @@ def default_cell(f: mi.Field) -> str:
     if value is None or isinstance(value, bool | int | float):
         return toml(value)
     text = toml(msgspec.to_builtins(value))
-    return f"`{text}`" if len(text) <= _INLINE_MAX else "the table below"
+    return f"`{text}`" if len(text) <= _INLINE_MAX else "per key"
 
 
 def _bound(*pairs: tuple[str, float | None]) -> tuple[str, float] | None:
@@ -119,7 +119,7 @@ def type_cell(t: Any) -> str:
     if isinstance(t, mi.LiteralType):
         return "one of " + ", ".join(f"`{v}`" for v in t.values)
     if isinstance(t, mi.UnionType):
-        kinds = [type_cell(x) for x in t.types if not isinstance(x, mi.NoneType)]
+        kinds = list(dict.fromkeys(type_cell(x) for x in t.types if not isinstance(x, mi.NoneType)))
         return " or ".join(kinds) + (" or none" if t.includes_none else "")
     if isinstance(t, mi.ListType | mi.VarTupleType | mi.SetType | mi.FrozenSetType):
         return "list of " + type_cell(t.item_type)

@@ -50,8 +50,6 @@ PENDING = {
     "services.register.targets.TargetConfig",
     "services.scanner.sim.config.FaroSimConfig",
     "services.scanner.sim.faults.FaroFaults",
-    "services.sim.config.SimConfig",
-    "services.sim.config.SimRobotConfig",
     "services.sim.faults.Multipath",
     "services.sim.faults.OdometryFreeze",
     "services.sim.faults.RtkFloat",
