@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 export MPLBACKEND := Agg
 
-.PHONY: test lint typecheck pytest sim hil bench results faults soak e2e venv clean
+.PHONY: test lint typecheck pytest sim hil bench results faults soak e2e docs venv clean
 
 venv: $(STAMP)
 
@@ -54,6 +54,13 @@ bench: $(STAMP)
 # Runs no benchmark.
 results: $(STAMP)
 	$(BIN)/python -m phenorover.eval.render_results
+
+# The reference tables in docs/ (every option of the manifest, the field, the robot
+# description and each service table; mission.db's columns) from the code: the
+# options' attribute docstrings, defaults and bounds, the schema's comments. A doc that
+# differs fails tests/docs/test_refdocs.py.
+docs: $(STAMP)
+	$(BIN)/python -m phenorover.refdocs
 
 # The fault campaign: each service killed and each injected fault during a survey of
 # the tiny field, judged by the simulator's truth; writes docs/bench/faults.json and

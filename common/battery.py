@@ -68,12 +68,12 @@ class Battery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=T
 
 
 class Pace(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """How fast a survey goes, for its estimates: ``speed`` (m/s) the mean along a
-    route, turns included; ``location_s`` the time at each location (positioning,
-    settling and the scan)."""
+    """How fast a survey goes, for its estimates."""
 
     speed: Annotated[float, msgspec.Meta(gt=0.0, le=10.0)] = 0.3
+    """The mean speed along a route, turns included (m/s)."""
     location_s: Seconds = 300.0
+    """The time at each location: positioning, settling and the scan (s)."""
 
     def drive_s(self, metres: float) -> float:
         return metres / self.speed

@@ -71,9 +71,13 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
     """The definitions' parameters (metres; a percentile in 0-100)."""
 
     cell: Cell = 0.05
+    """Canopy height model cells and slices along the row."""
     voxel: Cell = 0.1
+    """The occupancy volume's voxels."""
     min_height: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.05
+    """Points lower than this above the ground are ground."""
     height_percentile: Annotated[float, msgspec.Meta(ge=50.0, le=100.0)] = 99.0
+    """The percentile of the canopy height model a plot's height is."""
 
     def method(self, trait: str) -> str:
         """How ``trait`` is computed, in words (the long-format CSV's ``method``)."""

@@ -28,15 +28,18 @@ class ConfigError(ValueError):
 
 
 class TlsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """TLS for the links between machines (``tls/`` endpoints). Paths are PEM files.
-
-    With ``mutual`` both sides present certificates signed by ``root_ca``.
-    """
+    """TLS for the links between machines (``tls/`` endpoints)."""
 
     root_ca: str
+    """The certificate authority's certificate (PEM path) the peers' certificates are
+    signed by."""
     certificate: str = ""
+    """This machine's certificate (PEM path)."""
     private_key: str = ""
+    """Its private key (PEM path)."""
     mutual: bool = False
+    """Both sides present certificates signed by ``root_ca`` (mutual TLS; access control
+    needs it)."""
 
 
 Role = Literal["robot", "jetson", "basestation", "hub"]
@@ -45,32 +48,34 @@ Role = Literal["robot", "jetson", "basestation", "hub"]
 class AccessConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Zenoh access control on this machine's router (made by :func:`common.acl.router_acl`;
     see docs/security.md). Needs mutual TLS: remote machines are known by their
-    certificate's common name.
-
-    ``remotes`` maps the common name of each machine whose router links to this one to
-    its role (``robot``, ``jetson``, ``basestation``, or ``hub`` for the router this one
-    links to, which relays the others' traffic after checking it); any other link is
-    denied everything. ``loopback`` is the interface this machine's own processes reach
-    the router on; they may do anything.
-    """
+    certificate's common name; any other link is denied everything."""
 
     remotes: dict[str, Role]
+    """The certificate common name of each machine whose router links to this one ->
+    its role: ``robot``, ``jetson``, ``basestation``, or ``hub`` for the router this one
+    links to, which relays the others' traffic after checking it."""
     loopback: str = "lo"
+    """The interface this machine's own processes reach the router on; they may do
+    anything."""
 
 
 class ZenohSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """This machine's Zenoh: the router hosted by ``phenorover up`` listens on
-    ``listen`` and connects to the other machines' routers in ``connect``; the
-    services on this machine are peers that connect to the local router (and mesh
-    among themselves on loopback). Multicast scouting is always off."""
+    """This machine's Zenoh: the services on this machine are peers that connect to the
+    local router (and mesh among themselves on loopback). Multicast scouting is always
+    off."""
 
     listen: list[str] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:7447"])
+    """Endpoints the router hosted by ``phenorover up`` listens on."""
     connect: list[str] = msgspec.field(default_factory=list)
-    # where the services and the CLI on this machine reach the router
+    """Other machines' routers to link to."""
     local: list[str] = msgspec.field(default_factory=list)
+    """Where this machine's services and CLI reach the router (empty: the plain
+    ``listen`` endpoints, on loopback)."""
     tls: TlsConfig | None = None
-    # None: no access control (the simulated deployment, loopback only)
+    """TLS for the links between machines."""
     access: AccessConfig | None = None
+    """Access control (none: no access control, as in the simulated deployment, loopback
+    only)."""
 
     def local_endpoints(self) -> list[str]:
         """Where this machine's services and CLI reach its router: ``local``, else the
@@ -80,33 +85,49 @@ class ZenohSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
 
 
 class Manifest(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """One machine's deployment. ``field`` is the field being surveyed (an example
-    name such as ``engr`` or a field file): its georeference defines the ``field``
-    frame for every service. No example is assumed: empty (the default) means none,
-    and the launcher refuses a manifest whose services need one, so a robot never
-    surveys an example field by accident. ``robot`` is the robot description
-    (:mod:`common.robot`): a file, or the name of a shipped one; empty (the default)
-    is the shipped Husky A200, ``common/robots/husky.toml``. ``hung_after_s``: a
-    service whose process lives but whose heartbeat (``health/<service>``, once a
-    second) has been silent this long (wall time) is taken for hung, killed and
-    restarted by the launcher, as one that died. ``namespace``: the robot's, when
-    several share a field (:mod:`common.keys`): its services' keys live under
-    ``phenorover/<namespace>/``; empty (the default) for a robot surveying alone."""
+    """One machine's deployment: its name, its Zenoh endpoints, its clock, the field,
+    the robot, and the services it runs with their config sections."""
 
     machine: str
+    """This machine's name: in liveliness tokens, ``phenorover status``, and the
+    certificate common name the access control matches."""
     field: str = ""
+    """The surveyed field: ``engr``, ``spl`` (the paper's fields, shipped) or a
+    ``.toml``/``.geojson`` file. Its georeference defines the ``field`` frame for every
+    service. No example is assumed: empty means none, and a manifest whose services need
+    a field (sim, gnss, nav, reach-sim) is refused, so a robot never surveys an example
+    field by accident."""
     robot: str = ""
+    """The robot description (:mod:`common.robot`): a file, or the name of one shipped
+    with phenorover (``husky``); empty is the shipped Husky A200,
+    ``common/robots/husky.toml``."""
     namespace: Namespace = ""
+    """The robot's, when several share a field (:mod:`common.keys`): its services' keys
+    live under ``phenorover/<namespace>/`` (letters, digits, ``-``, ``_``; up to 32) and
+    its services are named ``<namespace>.<service>`` where robots meet (docs/fleet.md);
+    empty for a robot surveying alone."""
     clock: Literal["wall", "sim"] = "wall"
-    # with the sim clock: the world waits for the services each step
-    # (common/lockstep.py), up to ``lockstep_deadline_s`` of wall time for a hung one
+    """``wall``, or ``sim`` to follow the simulator's clock (a simulated world, which
+    also places a field with no georeference at the default origin)."""
     lockstep: bool = False
+    """With the sim clock: the world waits each step for the services that follow it
+    (:mod:`common.lockstep`), so the same seed gives the same run at any speed and load
+    (docs/simulation.md)."""
     lockstep_deadline_s: Annotated[float, msgspec.Meta(gt=0, le=600.0)] = 60.0
+    """In lockstep, a service that has not acknowledged a step within this long (wall
+    seconds) is hung: it is logged and stepped past."""
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
-    # service name -> its config section, decoded by the service's own Config type
+    """This machine's router."""
     services: dict[str, dict[str, Any]] = msgspec.field(default_factory=dict)
+    """One table per service this machine runs (``[services.<name>]``), decoded by the
+    service's own config type."""
     run_dir: str = "runs"
+    """Where missions write their folders (``<run_dir>/<mission>/``) and the simulator
+    its snapshot."""
     hung_after_s: Annotated[float, msgspec.Meta(ge=3.0, le=600.0)] = 10.0
+    """A service whose process lives but whose heartbeat (``health/<service>``, once a
+    second) has been silent this long (wall seconds) is taken for hung: ``phenorover up``
+    kills and restarts it, as one that died (docs/faults.md)."""
 
 
 # Keys that left the service sections for the robot description (common/robot.py):

@@ -4,25 +4,10 @@ one transaction per change); registration and anything else only read it, throug
 :func:`read_log`, which opens it with SQLite's ``mode=ro`` so a reader that fails or is
 killed can never lose or corrupt it.
 
-Schema:
-
-- ``mission``: one row: ``id``, ``field``, ``created_ns``, ``plan_json`` (the plan
-  the survey follows, verbatim), ``state`` (running, paused, done, aborted).
-- ``steps``: one row per scan location in tour order: ``idx``, ``scan_id``,
-  ``cand_id``, planned ``x``, ``y``, ``yaw``; ``status`` (pending, driving, scanning,
-  done, failed, skipped); ``attempts``; ``file`` (the scan on the scanner's card);
-  ``started_ns``/``ended_ns`` (scan start and end, clock of the mission service);
-  pose statistics over the scan from the navigation estimate: ``mean_x``,
-  ``mean_y``, ``mean_z``, ``mean_yaw``, ``sd_x``, ``sd_y``, ``sd_z``, ``sd_yaw``
-  (metres, radians); the inclinometer's ``pitch`` and ``roll`` (radians);
-  ``nav_roll`` and ``nav_pitch``, the mean tilt navigation put the antennas' lever arms
-  through over the scan (radians; NULL: a planar estimate, antennas taken upright);
-  ``pose_x``, ``pose_y``, ``pose_z``, ``pose_yaw``: the navigation pose the scan is
-  placed with (metres, radians), by default the estimate at the scan's end (see
-  ``[services.mission] scan_pose``; NULL in a log written before the columns
-  existed, whose readers take the means);
-  ``reason`` for a failed or skipped step.
-- ``events``: ``stamp_ns``, ``level`` (info, warning, error), ``text``.
+:data:`SCHEMA` holds the tables and, after each line of columns, what they mean
+(docs/mission-log.md's tables are made from it, ``make docs``). Times are nanoseconds on
+the mission service's clock (sim time in simulation); lengths in metres, angles in
+radians, in the ``field`` frame.
 """
 
 from __future__ import annotations
@@ -34,21 +19,38 @@ from typing import Any
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS mission (
-    id TEXT PRIMARY KEY, field TEXT NOT NULL, created_ns INTEGER NOT NULL,
-    plan_json TEXT NOT NULL, state TEXT NOT NULL
+    id TEXT PRIMARY KEY,  -- the mission's name (its folder)
+    field TEXT NOT NULL,  -- the field surveyed
+    created_ns INTEGER NOT NULL,  -- when the mission was created
+    plan_json TEXT NOT NULL,  -- the plan the survey follows, verbatim
+    state TEXT NOT NULL  -- `running`, `paused`, `done`, `aborted`
 );
 CREATE TABLE IF NOT EXISTS steps (
-    idx INTEGER PRIMARY KEY, scan_id INTEGER NOT NULL, cand_id INTEGER NOT NULL,
-    x REAL NOT NULL, y REAL NOT NULL, yaw REAL,
-    status TEXT NOT NULL DEFAULT 'pending', attempts INTEGER NOT NULL DEFAULT 0,
-    file TEXT, started_ns INTEGER, ended_ns INTEGER,
-    mean_x REAL, mean_y REAL, mean_z REAL, mean_yaw REAL,
-    sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL, pitch REAL, roll REAL, reason TEXT,
-    nav_roll REAL, nav_pitch REAL,
-    pose_x REAL, pose_y REAL, pose_z REAL, pose_yaw REAL
+    idx INTEGER PRIMARY KEY,  -- position in the tour, from 0
+    scan_id INTEGER NOT NULL,  -- the scan's number (its file `Scan_NNNNN.e57`)
+    cand_id INTEGER NOT NULL,  -- the plan's candidate id of the location
+    x REAL NOT NULL, y REAL NOT NULL,  -- the planned location
+    yaw REAL,  -- the planned heading, NULL when the plan gives none
+    status TEXT NOT NULL DEFAULT 'pending',  -- `pending`, `driving`, `scanning`,
+    -- `done`, `failed`, `skipped`
+    attempts INTEGER NOT NULL DEFAULT 0,  -- scan attempts so far
+    file TEXT,  -- the scan file on the scanner's card
+    started_ns INTEGER, ended_ns INTEGER,  -- scan start and end
+    mean_x REAL, mean_y REAL, mean_z REAL, mean_yaw REAL,  -- the navigation pose's mean
+    -- over the scan
+    sd_x REAL, sd_y REAL, sd_z REAL, sd_yaw REAL,  -- its standard deviation over the scan
+    pitch REAL, roll REAL,  -- the scanner inclinometer's pitch and roll for the scan
+    reason TEXT,  -- why a step failed or was skipped
+    nav_roll REAL, nav_pitch REAL,  -- the mean tilt (IMU) navigation turned the antennas'
+    -- lever arms by over the scan; NULL for a planar estimate (antennas taken upright)
+    pose_x REAL, pose_y REAL, pose_z REAL, pose_yaw REAL  -- the navigation pose the scan
+    -- is placed with: by default the estimate at the scan's end (`[services.mission]
+    -- scan_pose`); NULL in a log written before these columns, whose readers take the means
 );
 CREATE TABLE IF NOT EXISTS events (
-    stamp_ns INTEGER NOT NULL, level TEXT NOT NULL, text TEXT NOT NULL
+    stamp_ns INTEGER NOT NULL,  -- when
+    level TEXT NOT NULL,  -- `info`, `warning`, `error`
+    text TEXT NOT NULL  -- one line
 );
 """
 
@@ -64,7 +66,7 @@ class MissionLogError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class Step:
-    """One row of ``steps`` (see the module docstring for the columns' meaning)."""
+    """One row of ``steps`` (:data:`SCHEMA` says what each column means)."""
 
     idx: int
     scan_id: int

@@ -11,13 +11,15 @@ from common.messages.core import Angle, FileName, Message, Probability
 
 
 class ScanProfile(msgspec.Struct, frozen=True, kw_only=True):
-    """A scan's settings: ``resolution`` as FARO's fraction denominator (1/4 -> 4),
-    ``quality`` 1..8 (FARO's noise-compression factor), ``scan_id`` a positive number
-    that names the file."""
+    """A scan's settings."""
 
     scan_id: Annotated[int, msgspec.Meta(ge=1, le=65535)]
+    """The number that names the scan's file (``Scan_NNNNN``); the mission sets it per
+    location."""
     resolution: Annotated[int, msgspec.Meta(ge=1, le=32)] = 4
+    """FARO's resolution as its fraction's denominator (1/4 -> 4)."""
     quality: Annotated[int, msgspec.Meta(ge=1, le=8)] = 4
+    """FARO's quality, its noise-compression factor."""
 
 
 class StartScan(msgspec.Struct, frozen=True, tag=True):

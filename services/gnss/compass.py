@@ -34,11 +34,13 @@ class BaselineMismatch(CompassError):
 
 
 class CompassConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``[services.gnss.compass]``. The default tolerance, 5 cm, is about 5 sigma of the
-    along-baseline error of two independent 7 mm RTK fixes (sqrt(2) * 7 mm ~ 1 cm), and
-    below what a float fix (decimetres) usually gives."""
+    """``[services.gnss.compass]``."""
 
     baseline_tolerance_m: Positive = 0.05
+    """A heading whose measured antenna separation differs from the mounted one by more
+    is rejected. 5 cm is about 5 sigma of the along-baseline error of two independent
+    7 mm RTK fixes (sqrt(2) * 7 mm ~ 1 cm), and below what a float fix (decimetres)
+    usually gives."""
 
 
 class Compass(msgspec.Struct, frozen=True, kw_only=True):

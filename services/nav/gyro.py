@@ -36,21 +36,23 @@ from common.messages.core import Positive
 
 
 class GyroConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``enabled``: fuse the IMU's yaw rate (false: the paper's odometry-and-compass
-    filter). ``sd``: the 1-sigma of one sample (rad/s; UM7-class rate gyros read about
-    0.01 rad/s of white noise at 10-20 Hz). ``bias_tau_s``: the standing average's time
-    constant (s): long against the noise, short against the bias's drift with the
-    unit's temperature over a field day. ``min_still_samples``: standing samples
-    before the bias counts as known. ``max_rate``: a reading beyond it (rad/s) is
-    refused as absurd (the Husky turns at 2 rad/s at most)."""
+    """The IMU's yaw rate beside the wheels' (docs/navigation.md)."""
 
     enabled: bool = True
+    """Fuse the IMU's yaw rate (false: the paper's odometry-and-compass filter)."""
     sd: Positive = 0.01
+    """The 1-sigma of one sample (rad/s; UM7-class rate gyros read about 0.01 rad/s of
+    white noise at 10-20 Hz)."""
     bias_tau_s: Positive = 30.0
+    """The standing average's time constant (s): long against the noise, short against
+    the bias's drift with the unit's temperature over a field day."""
     min_still_samples: Annotated[int, msgspec.Meta(ge=1)] = 20
+    """Standing samples before the bias counts as known."""
     max_rate: Positive = 4.0
-    # a rate older than this (s) no longer stands in for the wheels'
+    """A reading beyond it (rad/s) is refused as absurd (the Husky turns at 2 rad/s at
+    most)."""
     max_age_s: Positive = 0.3
+    """A rate older than this (s) no longer stands in for the wheels'."""
 
 
 class Gyro:

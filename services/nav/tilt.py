@@ -38,27 +38,31 @@ from services.nav.turn_level import TurnLevel, TurnLevelConfig
 
 
 class TiltConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``enabled``: false leaves the antennas' lean uncorrected (the paper's planar
-    localization). ``tau_s``: low-pass time constant of the tilt (s). ``max_accel``:
-    fuse IMU samples only while the body's longitudinal and centripetal
-    accelerations (from odometry over ``accel_window_s``) stay below this (m/s^2):
-    0.1 m/s^2 leaks at most 0.3 deg into the UM7's tilt, 5 mm at the antennas.
-    ``max_age_s``: an older tilt is not used (no IMU: the lean stays uncorrected).
-    ``calibrate``: take the IMU's bias off with the scanner's compensator, read where
-    the compensator is valid (``compensator_range_deg``, FARO: +-2 deg).
-    ``max_tilt_deg``: a sample beyond it is refused as absurd (a Husky tilted 20 deg
-    is not surveying; the UM7 says so only when broken or lied for). ``turns``: the
-    bias from turns in place, until a scan's compensator reading gives a better one."""
+    """The IMU's tilt on the antennas' lever arms (docs/navigation.md)."""
 
     enabled: bool = True
+    """False leaves the antennas' lean uncorrected (the paper's planar localization)."""
     tau_s: Positive = 0.5
+    """Low-pass time constant of the tilt (s)."""
     max_accel: Positive = 0.1
+    """Fuse IMU samples only while the body's longitudinal and centripetal accelerations
+    (from odometry over ``accel_window_s``) stay below this (m/s²): 0.1 m/s² leaks at
+    most 0.3 deg into the UM7's tilt, 5 mm at the antennas."""
     accel_window_s: Positive = 0.5
+    """The odometry window the accelerations are taken over (s)."""
     max_age_s: Positive = 2.0
+    """An older tilt is not used (no IMU: the lean stays uncorrected)."""
     calibrate: bool = True
+    """Take the IMU's bias off with the scanner's compensator, read where the compensator
+    is valid."""
     compensator_range_deg: Positive = 2.0
+    """Where the scanner's compensator is valid (FARO: ±2 deg)."""
     max_tilt_deg: Positive = 20.0
+    """A sample beyond it is refused as absurd (a Husky tilted 20 deg is not surveying;
+    the UM7 says so only when broken or lied for)."""
     turns: TurnLevelConfig = msgspec.field(default_factory=TurnLevelConfig)
+    """The bias from turns in place, until a scan's compensator reading gives a better
+    one."""
 
 
 def tilt_of(r: np.ndarray) -> tuple[float, float]:

@@ -32,19 +32,22 @@ MAX_SAMPLES = 20_000
 
 
 class TurnLevelConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``enabled``: estimate the IMU's bias from turns in place. ``spot_radius_m``: how
-    far the robot may move and still be on one spot (a turn in place wanders a few
-    centimetres sideways). ``still_speed``: faster than this (m/s) it is driving, not
-    turning in place. ``min_span_deg``: the headings a spot needs (90 deg amplifies the
-    IMU's noise by 1.4 against a reversal). ``min_samples``, ``max_residual_deg``: a
-    spot's fit needs that many samples and residuals below that RMS."""
+    """The IMU's bias from turns in place (``[services.nav.tilt.turns]``)."""
 
     enabled: bool = True
+    """Estimate the IMU's bias from turns in place."""
     spot_radius_m: Positive = 0.1
+    """How far the robot may move and still be on one spot (a turn in place wanders a
+    few centimetres sideways)."""
     still_speed: Positive = 0.02
+    """Faster than this (m/s) it is driving, not turning in place."""
     min_span_deg: Positive = 60.0
+    """The headings a spot needs (90 deg amplifies the IMU's noise by 1.4 against a
+    reversal)."""
     min_samples: Annotated[int, msgspec.Meta(ge=4)] = 20
+    """A spot's fit needs this many samples."""
     max_residual_deg: Positive = 0.3
+    """A spot's fit needs residuals below this RMS."""
 
 
 def heading_span(psi: np.ndarray) -> float:

@@ -36,11 +36,12 @@ DEFAULT_WORKER_MEMORY_MB = 4096
 
 
 class PlanBudget(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``max_cell_candidates``: the most cell-candidate pairs in range a plan may need.
-    ``worker_memory_mb``: the data-segment limit of each planning worker (0: none)."""
+    """The most a plan may cost; a field over it is refused before it is planned."""
 
     max_cell_candidates: Annotated[int, msgspec.Meta(gt=0)] = DEFAULT_MAX_CELL_CANDIDATES
+    """The most cell-candidate pairs within the scanner's range a plan may need."""
     worker_memory_mb: Annotated[int, msgspec.Meta(ge=0)] = DEFAULT_WORKER_MEMORY_MB
+    """The data-segment limit of each planning worker, MB (0: none)."""
 
 
 class OverBudget(FieldError):

@@ -29,53 +29,62 @@ class GroundConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     """How the ground is found (:mod:`.ground`), metres.
 
     The cloth simulation filter (Zhang et al. 2016, Remote Sens. 8:501) runs on the
-    lowest point of every ``reduce_cell`` square, which keeps the ground and drops
-    most of the canopy before the filter sees it (seconds instead of minutes on a
-    survey). ``cloth_resolution``, ``rigidness`` (1 steep, 2 relief, 3 flat: a breeding
-    field is flat, and a stiff cloth bridges a plot's canopy instead of sagging into
-    it), ``class_threshold`` (how far above the cloth a point is still ground),
-    ``slope_smooth`` and ``iterations`` are the filter's. The ground model is the
-    median of the ground points in ``grid_cell`` squares, holes filled from the
-    nearest measured square; ``crop_margin``: how far beyond the field boundary
-    points are kept (the scanner sees tens of metres past it, traits need none).
-    ``max_step``: a ground square more than this above the median of the squares
-    within ``step_window`` is canopy the filter let through, dropped and refilled.
-    ``refine_band``: the ground model is then made again from every point of the
-    cloud within this of it (0: no second pass), since the lowest points the filter
-    saw lie below the surface by the range noise (about 1 cm at 1 cm noise); keep
-    it under ``definition.min_height`` so no canopy enters.
-    """
+    lowest point of every ``reduce_cell`` square, which keeps the ground and drops most
+    of the canopy before the filter sees it (seconds instead of minutes on a survey).
+    The ground model is the median of the ground points in ``grid_cell`` squares, holes
+    filled from the nearest measured square."""
 
     reduce_cell: Annotated[float, msgspec.Meta(ge=0.01, le=1.0)] = 0.08
+    """The squares whose lowest point the cloth filter runs on."""
     cloth_resolution: Annotated[float, msgspec.Meta(ge=0.05, le=5.0)] = 0.3
+    """The cloth filter's resolution."""
     rigidness: Annotated[int, msgspec.Meta(ge=1, le=3)] = 3
+    """The cloth's rigidness: 1 steep, 2 relief, 3 flat (a breeding field is flat, and a
+    stiff cloth bridges a plot's canopy instead of sagging into it)."""
     class_threshold: Annotated[float, msgspec.Meta(gt=0.0, le=2.0)] = 0.1
+    """How far above the cloth a point is still ground."""
     slope_smooth: bool = True
+    """The cloth filter's slope smoothing."""
     iterations: Annotated[int, msgspec.Meta(ge=10, le=5000)] = 500
+    """The cloth filter's iterations."""
     grid_cell: Annotated[float, msgspec.Meta(ge=0.05, le=5.0)] = 0.25
+    """The ground model's squares."""
     crop_margin: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 1.0
+    """How far beyond the field boundary points are kept (the scanner sees tens of
+    metres past it, traits need none)."""
     max_step: Metres = 0.15
+    """A ground square more than this above the median of the squares within
+    ``step_window`` is canopy the filter let through, dropped and refilled."""
     step_window: Metres = 3.0
+    """The neighbourhood ``max_step`` is judged over."""
     refine_band: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.03
+    """The ground model is then made again from every point of the cloud within this of
+    it (0: no second pass), since the lowest points the filter saw lie below the surface
+    by the range noise (about 1 cm at 1 cm noise); keep it under
+    ``definition.min_height`` so no canopy enters."""
 
 
 class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """``[services.traits]``: ``definition`` (the traits' parameters,
-    :class:`common.canopy.CanopyDefinition`), ``ground`` (:class:`GroundConfig`),
-    ``min_seen`` (a plot whose footprint cells holding a point are fewer than this
-    share is flagged ``occluded``: its traits describe only the part the scanner saw)
-    and ``figures`` (write ``fieldmap.png`` and ``growth.png``). A season
-    (:mod:`.series`): ``stable_margin``, how far from every plot a ground cell must be
-    to count as stable (lanes, headlands: m); ``offset_tolerance_m``, the vertical
-    offset between two dates' stable ground above which heights are corrected by it
-    (1 cm: smaller ones are within what registration achieves)."""
+    """``[services.traits]``: the per-plot traits of a registered survey, and of a season
+    of them (:mod:`.series`)."""
 
     definition: CanopyDefinition = CanopyDefinition()
+    """The traits' parameters (:class:`common.canopy.CanopyDefinition`)."""
     ground: GroundConfig = GroundConfig()
+    """How the ground is found."""
     min_seen: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
+    """A plot whose footprint cells holding a point are fewer than this share (seen from
+    both lanes over less than this share of its length) is flagged ``occluded``: its
+    traits describe only the part the scanner saw."""
     figures: bool = True
+    """Write ``fieldmap.png`` (and a season's ``growth.png``)."""
     stable_margin: Annotated[float, msgspec.Meta(ge=0.0, le=5.0)] = 0.3
+    """A season: how far from every plot a ground cell must be to count as stable
+    (lanes, headlands: m)."""
     offset_tolerance_m: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.01
+    """A season: the vertical offset between two dates' stable ground above which
+    heights are corrected by it (1 cm: smaller ones are within what registration
+    achieves)."""
 
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
