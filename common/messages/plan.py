@@ -89,8 +89,7 @@ class CoverSummary(msgspec.Struct, frozen=True, kw_only=True):
 
 class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
     """The closed tour ``order`` (ids, starting and ending at 0) under ``nav``;
-    ``nn_length`` is the nearest-neighbour baseline under the same distances and
-    ``length_by_nav`` the optimal length under each distance model when cheap to get.
+    ``nn_length`` is the nearest-neighbour baseline under the same distances.
     ``bound``: a lower bound on the shortest tour when the tour is not proven optimal
     (Held-Karp's 1-tree bound), so ``length / bound - 1`` bounds how far from the
     optimum it is."""
@@ -102,7 +101,6 @@ class TourSummary(msgspec.Struct, frozen=True, kw_only=True):
     status: str
     nn_length: NonNegative
     nn_order: list[int]
-    length_by_nav: dict[str, NonNegative]
     time_s: NonNegative
     bound: NonNegative | None = None
 
@@ -202,7 +200,6 @@ class PlanResult(Message, frozen=True, kw_only=True):
             method=f"robot {robot} of {len(parts)} ({self.tour.method}, split {self.fleet.status})",
             nn_length=length,  # the whole tour's baselines and bound are not this share's
             nn_order=part.order,
-            length_by_nav={},
             bound=None,
         )
         return msgspec.structs.replace(

@@ -131,7 +131,9 @@ def fleet_rows(r: PlanResult) -> list[tuple[str, str]]:
     return rows
 
 
-def summary(r: PlanResult) -> str:
+def summary(r: PlanResult, by_nav: dict[str, float] | None = None) -> str:
+    """The plan in a few lines; ``by_nav``: the optimum under each navigation mode
+    (:func:`services.planner.compare.lengths_by_nav`), printed when given."""
     c, t, v = r.cover, r.tour, r.visibility
     rows = [
         ("field", f"{r.field}: {len(r.candidates)} candidate locations"),
@@ -161,12 +163,9 @@ def summary(r: PlanResult) -> str:
         rows.append(("survey", survey_line(r)))
     if r.fleet is not None:
         rows.extend(fleet_rows(r))
-    if t.length_by_nav:
+    if by_nav:
         rows.append(
-            (
-                "optimum by nav",
-                ", ".join(f"{k.upper()} {v:.1f} m" for k, v in t.length_by_nav.items()),
-            )
+            ("optimum by nav", ", ".join(f"{k.upper()} {v:.1f} m" for k, v in by_nav.items()))
         )
     rows.append(("timings", ", ".join(f"{k} {v:.3f} s" for k, v in r.timings.items())))
     w = max(len(k) for k, _ in rows)
@@ -231,8 +230,20 @@ def cmd_plan(args: argparse.Namespace) -> int:
         except (FieldError, ValueError, ClusterError) as exc:
             print(f"phenorover plan: {exc}", file=sys.stderr)
             return 2
-    print(summary(result))
+    print(summary(result, _by_nav(req, result)))
     return _write(args, result)
+
+
+def _by_nav(req: PlanRequest, result: PlanResult) -> dict[str, float]:
+    """The paper's comparison of navigation modes for ``result`` (empty on a field
+    this machine cannot read, planned remotely)."""
+    from services.planner.compare import lengths_by_nav
+    from services.planner.request import resolve_field
+
+    try:
+        return lengths_by_nav(resolve_field(req)[1], result)
+    except FieldError:
+        return {}
 
 
 def _plan_here(args: argparse.Namespace, req: PlanRequest) -> PlanResult:

@@ -25,10 +25,9 @@ from common.messages.plan import (
 )
 from services.planner.cover import Cover, exact_cover, greedy_cover
 from services.planner.fleet import fleet
-from services.planner.route import NAV_MODES, Navigator
+from services.planner.route import Navigator
 from services.planner.swaps import survey_estimate, via_origin
 from services.planner.tsp import (
-    circuit_cpsat,
     nearest_neighbour,
     one_tree_bound,
     solve_tour,
@@ -37,10 +36,6 @@ from services.planner.visibility import Chunks, Progress, compute_visibility
 from services.planner.waypoints import tour_legs
 
 log = logging.getLogger(__name__)
-
-
-# the paper's comparison of navigation modes is made on its fields' dozen locations
-PAPER_COMPARISON_MAX = 14
 
 
 def _cover_summary(c: Cover, method: str, greedy_count: int) -> CoverSummary:
@@ -101,7 +96,7 @@ def plan(
     sel = list(cover.selected)
     pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[sel]])
     ids: list[int | None] = [None, *(int(fld.cand_ids[j]) for j in sel)]
-    order, tour = _tour(fld, nav, opt, pts, ids, t)
+    order, tour = _tour(nav, opt, pts, ids, t)
     timings["tour"] = tour.time_s
 
     t = time.perf_counter()
@@ -190,22 +185,16 @@ def _visibility(
 
 
 def _tour(
-    fld: Field, nav: Navigator, opt: PlanOptions, pts: F64, ids: list[int | None], t0: float
+    nav: Navigator, opt: PlanOptions, pts: F64, ids: list[int | None], t0: float
 ) -> tuple[list[int], TourSummary]:
     """The tour of ``pts`` (the Origin first) as node indices, and its summary: its
-    bound when not proven optimal, the nearest-neighbour tour beside it and, on few
-    enough locations, the optimum under every navigation mode (the paper's comparison
-    of them); ``t0`` when the stage began."""
+    bound when not proven optimal and the nearest-neighbour tour beside it (the paper's
+    baseline, the CP-SAT search's first tour); ``t0`` when the stage began."""
     dist = nav.distances(pts)
     tour = solve_tour(dist, opt.tour, opt.tour_time_limit_s)
     # how far from the optimum a tour not proven optimal can be
     bound = None if tour.status == "optimal" else one_tree_bound(dist, tour.length)
     nn = nearest_neighbour(dist)
-    by_nav: dict[str, float] = {}
-    if len(pts) <= PAPER_COMPARISON_MAX:
-        for mode in NAV_MODES:
-            other = nav if mode == opt.nav else Navigator(fld, mode, opt.open_rows, opt.open_cross)
-            by_nav[mode] = circuit_cpsat(other.distances(pts), opt.tour_time_limit_s).length
 
     def as_ids(order: list[int]) -> list[int]:
         return [0 if k == 0 else int(ids[k] or 0) for k in order] + [0]
@@ -218,7 +207,6 @@ def _tour(
         status=tour.status,
         nn_length=nn.length,
         nn_order=as_ids(nn.order),
-        length_by_nav=by_nav,
         time_s=time.perf_counter() - t0,
         bound=bound,
     )

@@ -187,7 +187,7 @@ def test_every_wire_type_has_been_walked() -> None:
 
     assert "$.legs[0].final_yaw" in [_where(p) for p, _ in float_paths(mi.type_info(FollowRoute))]
     plan = [_where(p) for p, _ in float_paths(mi.type_info(PlanResult))]
-    assert {"$.layout.origin_alt", "$.tour.length_by_nav[...]", "$.origin[1]"} <= set(plan)
+    assert {"$.layout.origin_alt", "$.cover.bound", "$.origin[1]"} <= set(plan)
 
 
 @settings(max_examples=200, deadline=None)

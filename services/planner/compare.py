@@ -1,0 +1,34 @@
+"""The paper's comparison of navigation modes: the shortest tour over a plan's
+locations under each way of driving between them (``br``, ``aha``, ``lanes``;
+:mod:`services.planner.route`). It is not part of planning, which drives by one mode:
+``phenorover plan`` prints it beside a plan of a field's dozen locations, where each
+optimum is proven in a fraction of a second."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.field import Field
+from common.messages.plan import PlanResult
+from services.planner.route import NAV_MODES, Navigator
+from services.planner.tsp import circuit_cpsat
+
+# the most locations (the Origin included) the comparison is made for
+MAX_NODES = 14
+
+
+def lengths_by_nav(fld: Field, result: PlanResult) -> dict[str, float]:
+    """The optimal tour length (m) over ``result``'s locations and the Origin under
+    each navigation mode, with the plan's open lanes; empty beyond ``MAX_NODES``."""
+    if len(result.selected) + 1 > MAX_NODES:
+        return {}
+    index = {int(c): k for k, c in enumerate(fld.cand_ids)}
+    pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[[index[c] for c in result.selected]]])
+    opt = result.options
+    return {
+        mode: circuit_cpsat(
+            Navigator(fld, mode, opt.open_rows, opt.open_cross).distances(pts),
+            opt.tour_time_limit_s,
+        ).length
+        for mode in NAV_MODES
+    }
