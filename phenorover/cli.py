@@ -61,7 +61,7 @@ def cmd_check(manifest: Path) -> int:
 
 
 def cmd_certs(args: argparse.Namespace) -> int:
-    from common.certs import CertError, init_ca, issue_files
+    from phenorover.certs import CertError, init_ca, issue_files
 
     hosts = [*args.host, *(("localhost", "127.0.0.1") if args.loopback else ())]
     try:
@@ -238,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     s.set_defaults(func=cmd_up)
 
-    from common.certs import DEFAULT_DIR
+    from phenorover.certs import DEFAULT_DIR
 
     s = sub.add_parser("certs", help="make the CA and the machines' TLS certificates")
     s.add_argument("action", choices=["init", "issue"], help="init: the CA; issue: a machine's")

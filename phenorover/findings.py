@@ -16,9 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from common.certs import tls_problems
 from common.config import ConfigError, Manifest, TlsConfig, ZenohSettings, decode_section
 from common.robot import robot_path
+from phenorover.certs import tls_problems
 from phenorover.preflight import (
     DeployedField,
     check_field,

@@ -13,13 +13,13 @@ from typing import Any, Protocol
 from common import keys
 from common.messages.base import BatteryState, Imu, LaserScan
 from common.messages.sim import SimWheelCommand
-from common.ros2 import msgs as ros
-from common.ros2.node import Ros2Node
-from common.ros2.types import BATTERY_STATE, CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
-from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
 from services.base.config import BaseConfig
 from services.base.refusals import Refusals
+from services.base.ros2 import msgs as ros
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import BATTERY_STATE, CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
+from services.base.ros2.wire import SENSOR_QOS
 from services.base.ros2_convert import (
     battery_from_ros,
     decode_battery,
@@ -102,7 +102,7 @@ class OdomWatch:
 class Ros2Base:
     """Any ROS 2 base: Twist or TwistStamped out; Odometry, LaserScan, Imu and
     BatteryState in; CDR payloads. Through rmw_zenoh (``ros2_layout = "rmw_zenoh"``,
-    :mod:`common.ros2`): this service is a ROS 2 node on the Zenoh network; through
+    :mod:`services.base.ros2`): this service is a ROS 2 node on the Zenoh network; through
     zenoh-bridge-ros2dds (``"bridge"``): the bridge maps ROS topic ``/cmd_vel`` to the
     Zenoh key ``cmd_vel`` (and so on).
 

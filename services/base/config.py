@@ -3,8 +3,8 @@ from typing import Annotated, Literal
 import msgspec
 
 from common.messages.core import BASE_FRAME, Positive
-from common.ros2.types import CmdVelType
-from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
+from services.base.ros2.types import CmdVelType
+from services.base.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
 
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from common.messages.base import BatteryState, Imu, LaserScan
 from common.messages.core import Array
-from common.ros2 import msgs as ros
+from services.base.ros2 import msgs as ros
 
 
 def decode_odometry(data: bytes) -> ros.Odometry:

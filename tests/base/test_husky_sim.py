@@ -20,10 +20,10 @@ from common.config import zenoh_config
 from common.messages.base import Imu, LaserScan, Twist
 from common.messages.core import Array
 from common.messages.sim import SimEncoders
-from common.ros2 import msgs as ros
-from common.ros2.node import Ros2Node
-from common.ros2.types import IMU, ODOMETRY, TWIST
 from common.transport import Bus
+from services.base.ros2 import msgs as ros
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import IMU, ODOMETRY, TWIST
 from services.base.sim.husky import HUSKY_COVARIANCE, IMU_YAW_VAR
 from tests.conftest import Procs, Record, record
 

@@ -1,4 +1,4 @@
-"""rmw_zenoh's wire (common.ros2) against implementations we did not write: rosbags'
+"""rmw_zenoh's wire (services.base.ros2) against implementations we did not write: rosbags'
 type store (RIHS01 hashes, CDR), zenoh-ext's serializer (the attachment, as zenoh-cpp
 writes it for rmw_zenoh) and zenoh-ros2-sdk's key and token builders; then a node on
 loopback that drops bad samples without raising."""
@@ -18,10 +18,10 @@ from zenoh_ros2_sdk.attachment import Attachment as SdkAttachment
 from zenoh_ros2_sdk.entity import EndpointEntity, EntityKind, NodeEntity
 from zenoh_ros2_sdk.keyexpr import endpoint_liveliness_keyexpr, node_liveliness_keyexpr
 
-from common.ros2 import msgs as ros
-from common.ros2 import wire
-from common.ros2.node import Ros2Node
-from common.ros2.types import (
+from services.base.ros2 import msgs as ros
+from services.base.ros2 import wire
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import (
     BATTERY_STATE,
     IMU,
     LASER_SCAN,

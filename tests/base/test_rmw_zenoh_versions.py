@@ -1,6 +1,6 @@
-"""Which rmw_zenoh_cpp releases common.ros2 interoperates with: GIDs computed as
+"""Which rmw_zenoh_cpp releases services.base.ros2 interoperates with: GIDs computed as
 upstream computes them, and the pre-0.2.4 named-field attachment recognised, refused
-and reported once per node with the versions named (see common.ros2.wire's doc)."""
+and reported once per node with the versions named (see services.base.ros2.wire's doc)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ import xxhash
 import zenoh
 import zenoh.ext as zext
 
-from common.ros2 import msgs as ros
-from common.ros2 import wire
-from common.ros2.node import Ros2Node
-from common.ros2.types import ODOMETRY, TWIST
+from services.base.ros2 import msgs as ros
+from services.base.ros2 import wire
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import ODOMETRY, TWIST
 
 ZID = "4b33868af7b46327b80673b0f621d09b"
 NODE_TOKEN = f"@ros2_lv/0/{ZID}/3/3/NN/%/%/husky_node"
@@ -102,7 +102,7 @@ def test_node_reports_an_old_peer_once(
     two_sessions: tuple[zenoh.Session, zenoh.Session], caplog: pytest.LogCaptureFixture
 ) -> None:
     a, b = two_sessions
-    caplog.set_level(logging.WARNING, logger="common.ros2.node")
+    caplog.set_level(logging.WARNING, logger="services.base.ros2.node")
     got: list[tuple[str, float]] = []
     cond = threading.Condition()
 
@@ -144,7 +144,7 @@ def test_node_reports_an_old_peer_once(
         b.put(key, TWIST.encode(ros.twist(0.7, 0.0)), attachment=good)
     assert wait(lambda: all(arrived(t, 0.7)() for t in topics), 5.0)
     assert sub.dropped == {keys[0]: 3, keys[1]: 2}
-    lines = [r.getMessage() for r in caplog.records if r.name == "common.ros2.node"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "services.base.ros2.node"]
     old_lines = [m for m in lines if "0.2.0-0.2.3" in m]
     assert len(old_lines) == 1 and "\n" not in old_lines[0]
     assert "listener" in old_lines[0] and "upgrade ros-jazzy-rmw-zenoh-cpp" in old_lines[0]

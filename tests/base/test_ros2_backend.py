@@ -12,11 +12,11 @@ import pytest
 
 from common.config import ConfigError, decode_section
 from common.messages.base import BatteryState, Imu
-from common.ros2 import msgs as ros
-from common.ros2.types import twist_of
 from common.transport import Bus
 from services.base.backends import OdomWatch, Ros2Base, Sinks
 from services.base.config import BaseConfig
+from services.base.ros2 import msgs as ros
+from services.base.ros2.types import twist_of
 from services.base.ros2_convert import battery_from_ros, decode_odometry, imu_from_ros
 from services.base.sim.husky import HuskySimConfig, command_age_s
 from tests.conftest import Record

@@ -9,8 +9,8 @@ import struct
 import numpy as np
 import pytest
 
-from common.ros2 import msgs as ros
-from common.ros2.types import IMU
+from services.base.ros2 import msgs as ros
+from services.base.ros2.types import IMU
 from services.base.ros2_convert import decode_odometry, scan_from_ros
 
 

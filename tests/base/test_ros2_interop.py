@@ -24,11 +24,11 @@ from zenoh_ros2_sdk.session import ZenohSession
 from common import keys
 from common.client import wait_alive
 from common.messages.base import Twist
-from common.ros2 import msgs as ros
-from common.ros2.node import Ros2Node
-from common.ros2.types import IMU
-from common.ros2.wire import SENSOR_QOS
 from common.transport import Bus
+from services.base.ros2 import msgs as ros
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import IMU
+from services.base.ros2.wire import SENSOR_QOS
 from tests.conftest import Procs, Record, record
 
 MSGS = Path(__file__).resolve().parent.parent / "data" / "ros2_msgs"

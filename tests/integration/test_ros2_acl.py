@@ -32,10 +32,10 @@ from common.acl import router_acl
 from common.client import wait_alive
 from common.config import zenoh_config
 from common.messages.base import Twist
-from common.ros2.wire import dds_type_name
 from common.transport import Bus
 from phenorover.preflight import validate
 from phenorover.router import ros2_domains, router_config
+from services.base.ros2.wire import dds_type_name
 from tests.conftest import REPO, Procs, free_port, record
 from tests.integration.test_tls import make_certs
 

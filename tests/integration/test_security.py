@@ -16,10 +16,10 @@ import zenoh
 from common import keys
 from common.acl import EVERYONE, ROLES, SIMULATION_ONLY, key_expr, may_send, router_acl
 from common.acl_log import DenialLog, parse_denial
-from common.certs import issue_files
 from common.config import AccessConfig, TlsConfig, zenoh_config
 from common.messages.mission import MissionEvent
 from common.transport import Bus
+from phenorover.certs import issue_files
 from phenorover.preflight import validate
 from phenorover.router import router_config
 from tests.conftest import REPO, Procs, free_port, record

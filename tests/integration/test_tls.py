@@ -1,5 +1,5 @@
 """Links between machines over mutual TLS: routers with certificates from
-``common.certs``, and strangers (no certificate, another CA's) refused."""
+``phenorover.certs``, and strangers (no certificate, another CA's) refused."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from common.certs import init_ca, issue_files
 from common.config import TlsConfig, zenoh_config
 from common.transport import Latest
+from phenorover.certs import init_ca, issue_files
 from tests.conftest import free_port
 
 MACHINES = ("robot", "jetson", "basestation")

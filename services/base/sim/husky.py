@@ -40,9 +40,12 @@ from common import keys
 from common.messages.base import BatteryState, Imu, LaserScan
 from common.messages.core import BASE_FRAME, ODOM_FRAME
 from common.messages.sim import SimEncoders, SimWheelCommand
-from common.ros2 import msgs as ros
-from common.ros2.node import Ros2Node
-from common.ros2.types import (
+from common.service import Context, run
+from services.base.drive import OdometryIntegrator
+from services.base.refusals import Refusals
+from services.base.ros2 import msgs as ros
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import (
     BATTERY_STATE,
     CMD_VEL_TYPES,
     IMU,
@@ -51,10 +54,7 @@ from common.ros2.types import (
     CmdVelType,
     twist_of,
 )
-from common.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
-from common.service import Context, run
-from services.base.drive import OdometryIntegrator
-from services.base.refusals import Refusals
+from services.base.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 
 Cov6 = tuple[float, float, float, float, float, float]
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]

@@ -1,7 +1,7 @@
 """ROS 2 messages as CDR (pycdr2): what the base's ``ros2`` backend and the simulated
 Husky driver put on the wire, under either key layout (rmw_zenoh or
 zenoh-bridge-ros2dds), and the builders that make them from plain values. The types
-are declared in :mod:`common.ros2.idl` (ROS 2 Jazzy's field layouts exactly) and read
+are declared in :mod:`services.base.ros2.idl` (ROS 2 Jazzy's field layouts exactly) and read
 from here; payloads carry the 4-byte CDR encapsulation header (little-endian, ``00 01
 00 00``), as rmw_zenoh's FastCDR (DDS_CDR mode) writes them.
 """
@@ -15,7 +15,7 @@ import warnings
 
 from scipy.spatial.transform import Rotation
 
-from common.ros2.idl import (
+from services.base.ros2.idl import (
     BatteryState,
     Header,
     Imu,

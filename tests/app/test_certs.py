@@ -1,4 +1,4 @@
-"""``common.certs`` and ``phenorover certs``: a CA and machine certificates that round
+"""``phenorover.certs`` and ``phenorover certs``: a CA and machine certificates that round
 trip, private keys, no silent overwrite, one-line errors."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from cryptography import x509
 
-from common.certs import (
+from phenorover.certs import (
     CertError,
     common_name,
     init_ca,

@@ -5,7 +5,7 @@ Topics only: publishers and subscriptions with their liveliness tokens. ROS 2 se
 (``SS``/``SC`` tokens, Zenoh queryables) and actions are not spoken.
 
 Supported peers: **rmw_zenoh_cpp 0.2.4 and later on Jazzy, 0.6.x on Kilted and 0.6.0
-to 0.12.0 on Rolling** (Zenoh 1.x); for the types of :mod:`common.ros2.types` their
+to 0.12.0 on Rolling** (Zenoh 1.x); for the types of :mod:`services.base.ros2.types` their
 attachment, tokens, keys and GIDs are the same. Read from ros2/rmw_zenoh as bloom
 released it (ros2-gbp/rmw_zenoh-release, tags ``release/<distro>/rmw_zenoh_cpp/
 <version>-1``, which hold the package directory ``rmw_zenoh_cpp/``):

@@ -1,6 +1,6 @@
 """ROS 2 message types as CDR (pycdr2): the field layouts of geometry_msgs, nav_msgs,
 sensor_msgs and std_msgs of ROS 2 Jazzy, exactly. Data declarations only; callers
-read them through :mod:`common.ros2.msgs`, beside the builders."""
+read them through :mod:`services.base.ros2.msgs`, beside the builders."""
 
 # mypy: disable-error-code="type-arg,valid-type"
 # (pycdr2 declares IDL types as subscripted annotations, array[float64, 36], that mypy

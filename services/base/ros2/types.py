@@ -6,8 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Generic, Literal, TypeVar
 
-from common.ros2 import msgs
-from common.ros2.wire import TYPE_HASHES, dds_type_name
+from services.base.ros2 import msgs
+from services.base.ros2.wire import TYPE_HASHES, dds_type_name
 
 T = TypeVar("T")
 

@@ -1,8 +1,8 @@
-"""A ROS 2 node over a Zenoh session, speaking rmw_zenoh (:mod:`common.ros2.wire`):
+"""A ROS 2 node over a Zenoh session, speaking rmw_zenoh (:mod:`services.base.ros2.wire`):
 what ``ros2 topic list`` on a machine with ``RMW_IMPLEMENTATION=rmw_zenoh_cpp`` sees
 as a node with its publishers and subscriptions, and what its nodes exchange data with.
 
-Topics only: ROS 2 services and actions are not spoken (see :mod:`common.ros2.wire`).
+Topics only: ROS 2 services and actions are not spoken (see :mod:`services.base.ros2.wire`).
 
 Callbacks run on Zenoh's threads. A sample without a valid attachment or with a
 payload that is not the topic's CDR is dropped (rmw_zenoh drops the first kind too),
@@ -25,8 +25,8 @@ from typing import Any, Generic, TypeVar
 
 import zenoh
 
-from common.ros2 import wire
-from common.ros2.types import RosType
+from services.base.ros2 import wire
+from services.base.ros2.types import RosType
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)
