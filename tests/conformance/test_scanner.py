@@ -75,7 +75,7 @@ def _device(
     """The FARO emulator at the far end of ``backend``'s wire (its card's renders asked
     on ``bus``); the scanner config that reaches it."""
     card, ctx = tmp / "card", context(bus, "faro-sim", tmp)
-    common = {"storage_dir": str(card), "status_hz": 20.0, "ack_timeout_s": 0.2}
+    common = {"storage_dir": str(card), "status_hz": 20.0, "ack_timeout_s": 0.3}
     common |= {"stuck_timeout_s": 0.5}
     if backend == "sim":
         return ScannerConfig(backend="sim", sim_faults=FAULTS, sim_scan_time_s=SCAN_S, **common)  # type: ignore[arg-type]
@@ -168,8 +168,9 @@ def test_a_lost_ack_is_retried(scanner: Scanner, caplog: pytest.LogCaptureFixtur
     with caplog.at_level("WARNING", logger="services.scanner.client"):
         start_scan(scanner.bus, LOST_ACK_ID)
     scanner.wait(LOST_ACK_ID, ScannerState.DONE)
-    retried = [r for r in caplog.records if "no ACK for InitiateScan" in r.getMessage()]
-    assert [r.getMessage() for r in retried] == ["no ACK for InitiateScan (attempt 1/3)"]
+    retried = [r.getMessage() for r in caplog.records if "no ACK for" in r.getMessage()]
+    # (a loaded machine may miss a later ACK's 0.3 s too: the first is the lost one)
+    assert retried[:1] == ["no ACK for InitiateScan (attempt 1/3)"], retried
 
 
 def test_a_device_that_never_answers_is_a_clear_error(scanner: Scanner) -> None:
