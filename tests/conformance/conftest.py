@@ -10,6 +10,7 @@ on ``client_bus``; the backend under test and its far end each get their own ses
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 from collections.abc import Iterator
@@ -23,7 +24,7 @@ from common.clock import WallClock
 from common.config import zenoh_config
 from common.service import Context
 from common.transport import Bus
-from tests.conftest import free_port
+from tests.conftest import client, free_port
 
 
 class Runs(Protocol):
@@ -70,3 +71,16 @@ class Running:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+@contextlib.contextmanager
+def sessions(
+    endpoint: str, *names: str
+) -> Iterator[tuple[list[Bus], contextlib.ExitStack, Running]]:
+    """A client session of the router at ``endpoint`` per name (a service's, its far
+    end's), a :class:`Running` that stops the services before those close, and an exit
+    stack for whatever else is opened on the way (closed first)."""
+    with contextlib.ExitStack() as stack:
+        buses = [stack.enter_context(client(endpoint, n)) for n in names]
+        run = stack.enter_context(Running())
+        yield buses, stack, run

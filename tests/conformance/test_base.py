@@ -11,7 +11,6 @@ simulated base would, so that a ROS 2 driver's odometry keeps flowing)."""
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -30,8 +29,8 @@ from common.transport import Bus
 from services.base.config import BaseConfig
 from services.base.service import BaseService
 from services.base.sim.husky import HuskySim, HuskySimConfig
-from tests.conformance.conftest import Running, context
-from tests.conftest import Record, client, record
+from tests.conformance.conftest import context, sessions
+from tests.conftest import Record, record
 
 BACKENDS = ["sim", "ros2", "ros2-bridge"]
 LIMITS = default_robot().limits
@@ -92,13 +91,8 @@ def base(
     request: pytest.FixtureRequest, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> Iterator[Base]:
     backend: str = request.param
-    with (
-        client(router_endpoint, "husky-sim") as husky_bus,
-        client(router_endpoint, "bridge") as bridge_bus,
-        client(router_endpoint, "base") as base_bus,
-        contextlib.ExitStack() as stack,
-        Running() as run,
-    ):
+    with sessions(router_endpoint, "husky-sim", "bridge", "base") as (buses, stack, run):
+        husky_bus, bridge_bus, base_bus = buses
         rig = Base(
             backend,
             client_bus.publisher(keys.BASE_CMD_VEL),

@@ -34,8 +34,8 @@ from services.gnss.rtk_model import STATES, RtkModelConfig
 from services.gnss.service import GnssService
 from services.gnss.sim.config import ReachOutput, ReachSimConfig
 from services.gnss.sim.reach import ReachSim
-from tests.conformance.conftest import Running, context
-from tests.conftest import Record, client, record
+from tests.conformance.conftest import Running, context, sessions
+from tests.conftest import Record, record
 
 BACKENDS = ["sim", "nmea-tcp", "nmea-serial"]
 HELD = RtkModelConfig(rates_per_s=[[0.0] * len(STATES) for _ in STATES])
@@ -115,11 +115,7 @@ def gnss(
     request: pytest.FixtureRequest, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> Iterator[Gnss]:
     backend: str = request.param
-    with (
-        client(router_endpoint, "reach-sim") as reach_bus,
-        client(router_endpoint, "gnss") as bus,
-        Running() as run,
-    ):
+    with sessions(router_endpoint, "reach-sim", "gnss") as ((reach_bus, bus), _, run):
         antennas = [AntennaConfig(id=1), AntennaConfig(id=2)]
         corrupt: Callable[[bytes], None] | None = None
         if backend != "sim":

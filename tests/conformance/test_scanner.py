@@ -33,8 +33,8 @@ from services.scanner.sim.card import RenderedCard, emulate
 from services.scanner.sim.config import FaroSimConfig
 from services.scanner.sim.faro import FaroSim
 from services.scanner.sim.faults import FaroFaults
-from tests.conformance.conftest import Running, context
-from tests.conftest import Record, client, record
+from tests.conformance.conftest import Running, context, sessions
+from tests.conftest import Record, record
 from tests.integration.test_scanner_service import serve_render, start_scan
 
 BACKENDS = ["sim", "can-virtual", "can-slcan"]
@@ -101,13 +101,8 @@ def scanner(
 ) -> Iterator[Scanner]:
     backend: str = request.param
     tmp = tmp_path_factory.mktemp(backend)
-    with (
-        client(router_endpoint, "sim") as bus,
-        client(router_endpoint, "faro-sim") as far_bus,
-        client(router_endpoint, "scanner") as scanner_bus,
-        contextlib.ExitStack() as stack,
-        Running() as run,
-    ):
+    with sessions(router_endpoint, "sim", "faro-sim", "scanner") as (buses, stack, run):
+        bus, far_bus, scanner_bus = buses
         renders = serve_render(bus)
         cfg = _device(backend, run, stack, far_bus, tmp)
         rig = Scanner(backend, bus, record(bus, keys.SCANNER_STATUS), renders, tmp / "card")
