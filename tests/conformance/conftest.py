@@ -46,25 +46,25 @@ def context(bus: Bus, name: str, run_dir: Path) -> Context:
 
 
 class Running:
-    """Runs services in threads (``start``) and stops them all at once (``close``, or
-    the end of a ``with`` block), failing when one does not stop within 5 s. Enter it
-    after the sessions the services use, so that it stops them before those close."""
+    """Runs services in threads (``start``) and stops them (``close``, or the end of a
+    ``with`` block) last started first, so that a far end (a device simulator) goes
+    after the service that talks to it; fails when one does not stop within 5 s. Enter
+    it after the sessions the services use, so that it stops them before those close."""
 
     def __init__(self) -> None:
-        self.stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._threads: list[tuple[threading.Thread, threading.Event]] = []
 
     def start(self, service: Runs, name: str) -> None:
-        thread = threading.Thread(target=service.run, args=(self.stop,), name=name)
+        stop = threading.Event()
+        thread = threading.Thread(target=service.run, args=(stop,), name=name)
         thread.start()
-        self._threads.append(thread)
+        self._threads.append((thread, stop))
 
     def close(self) -> None:
-        self.stop.set()
-        for t in self._threads:
-            t.join(timeout=5.0)
-        alive = [t.name for t in self._threads if t.is_alive()]
-        assert not alive, f"did not stop within 5 s: {alive}"
+        for thread, stop in reversed(self._threads):
+            stop.set()
+            thread.join(timeout=5.0)
+            assert not thread.is_alive(), f"{thread.name} did not stop within 5 s"
 
     def __enter__(self) -> Running:
         return self

@@ -43,6 +43,7 @@ YAW = math.radians(30.0)
 # the two antennas 0.95 m apart along base_link's x, heading YAW, at (10, 5) in the field
 P1 = (10.0 - 0.475 * math.cos(YAW), 5.0 - 0.475 * math.sin(YAW), 1.10)
 P2 = (10.0 + 0.475 * math.cos(YAW), 5.0 + 0.475 * math.sin(YAW), 1.10)
+STEP_M = 0.1  # how far the robot goes per epoch
 
 
 def more_than(n: int) -> Callable[[Sized], bool]:
@@ -63,10 +64,17 @@ class Gnss:
     k: int = 0
 
     def send(self, **faults: object) -> None:
-        """The next epoch of antenna truth (10 Hz of sim time)."""
-        stamp = self.k * NS // 10
-        self.truth.put(SimAntennas(stamp_ns=stamp, p1=P1, p2=P2, **faults))  # type: ignore[arg-type]
+        """The next epoch of antenna truth: 10 Hz of sim time, the robot driving 1 m/s
+        along the field's x (so a fix tells its epoch: :meth:`epoch`)."""
+        dx, stamp = STEP_M * self.k, self.k * NS // 10
+        p1, p2 = (P1[0] + dx, *P1[1:]), (P2[0] + dx, *P2[1:])
+        self.truth.put(SimAntennas(stamp_ns=stamp, p1=p1, p2=p2, **faults))  # type: ignore[arg-type]
         self.k += 1
+
+    def epoch(self, fix: NavSatFix) -> int:
+        """The epoch of an RTK-fixed ``fix`` (its noise is millimetres, a step 0.1 m)."""
+        x, _, _ = self.service.frame.wgs84_to_field(fix.latitude, fix.longitude, fix.altitude)
+        return round((float(x) - (P1 if fix.antenna == 1 else P2)[0]) / STEP_M)
 
     def step(self, rec: Record[NavSatFix] | Record[GnssHeading], **faults: object) -> None:
         """One epoch, and wait until ``rec`` has something more."""
@@ -159,13 +167,15 @@ def test_fixes_carry_the_fix_quality_and_the_receivers_precision(gnss: Gnss) -> 
 
 
 def test_a_receiver_in_an_outage_sends_no_fix_and_the_other_goes_on(gnss: Gnss) -> None:
-    one, two = gnss.fixes[1], gnss.fixes[2]
-    gnss.step(one)
-    n1, n2 = len(one), len(two)
-    for _ in range(3):
-        gnss.step(two, outage1=True)
-    gnss.step(one)  # one epoch in order on its line: the outage's would have come first
-    assert len(one) == n1 + 1 and len(two) >= n2 + 3
+    outage = range(gnss.k, gnss.k + 3)
+    for _ in outage:
+        gnss.send(outage1=True)
+    after = gnss.k
+    gnss.send()
+    for a in (1, 2):  # each antenna's fixes come in order: the outage's first
+        assert gnss.fixes[a].wait_for(lambda f: gnss.epoch(f) == after, timeout=5.0), a
+    assert not {gnss.epoch(f) for f in gnss.fixes[1]} & set(outage)
+    assert set(outage) <= {gnss.epoch(f) for f in gnss.fixes[2]}
 
 
 def test_the_heading_of_the_two_antennas_is_near_the_truth(gnss: Gnss) -> None:
