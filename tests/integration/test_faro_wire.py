@@ -49,23 +49,6 @@ def lines(log: Path, text: str) -> list[str]:
     return [line for line in log.read_text().splitlines() if text in line]
 
 
-def test_a_scan_over_the_wire_with_a_lost_ack_is_stored(
-    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
-) -> None:
-    renders = serve_render(client_bus)
-    status = client_bus.latest(keys.SCANNER_STATUS)
-    start(procs, router_endpoint, client_bus, tmp_path, "lose_first_acks=1")
-    start_scan(client_bus, 4)  # its first ACK is lost on the device: resent
-    assert status.wait_for(lambda s: s.state == ScannerState.SCANNING and s.progress > 0, 10)
-    done = status.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
-    assert done is not None and done.scan_id == 4 and done.progress == 1.0
-    assert Path(done.file) == (tmp_path / "card" / "Scan_00004.e57").resolve()
-    assert Path(done.file).read_bytes() == b"e57"  # rendered by the far process
-    assert abs(done.pitch - 0.01) < 1e-4 and abs(done.roll + 0.02) < 1e-4
-    assert [r.scan_id for r in renders] == [4]
-    assert len(lines(tmp_path / "scanner.log", "no ACK for InitiateScan (attempt 1/3)")) == 1
-
-
 def test_bus_off_is_said_once_and_the_scan_goes_on_when_the_bus_is_back(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:

@@ -3,7 +3,6 @@ bus; the test plays the simulator's renderer."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import pytest
@@ -46,22 +45,20 @@ def start_scan(bus: Bus, scan_id: int, resolution: int = 4, project: str = "") -
     return until_served(lambda: bus.call(keys.SCANNER_CMD, cmd, timeout=5), 10.0)
 
 
-def test_scan_runs_to_done_with_file_and_inclinometer(
+def test_a_scan_goes_into_its_projects_folder_and_a_path_out_of_the_card_is_refused(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
+    # progress, DONE, the file and the inclinometer on every backend: tests/conformance
     renders = serve_render(client_bus)
     status = client_bus.latest(keys.SCANNER_STATUS)
     start(procs, router_endpoint, client_bus, tmp_path)
     with pytest.raises(RpcError, match="project"):  # a path out of the card: refused
         start_scan(client_bus, 7, project="../elsewhere")
     start_scan(client_bus, 7, project="survey-1")
-    assert status.wait_for(lambda s: s.state == ScannerState.SCANNING, timeout=10)
     done = status.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
-    assert done is not None and done.scan_id == 7 and done.progress == 1.0
-    assert Path(done.file).read_bytes() == b"e57"
+    assert done is not None and done.scan_id == 7
     assert Path(done.file) == (tmp_path / "card" / "survey-1" / "Scan_00007.e57").resolve()
-    assert math.isclose(done.pitch, 0.01, abs_tol=1e-4)
-    assert math.isclose(done.roll, -0.02, abs_tol=1e-4)
+    assert Path(done.file).read_bytes() == b"e57"
     assert [r.scan_id for r in renders] == [7]
 
 
@@ -84,37 +81,6 @@ def test_a_status_stamped_after_a_retry_is_answered_speaks_of_the_retry(
     )
 
 
-def test_lost_ack_is_retried(
-    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
-) -> None:
-    serve_render(client_bus)
-    status = client_bus.latest(keys.SCANNER_STATUS)
-    start(procs, router_endpoint, client_bus, tmp_path, "sim_faults.lose_first_acks=1")
-    start_scan(client_bus, 3)
-    assert status.wait_for(lambda s: s.state == ScannerState.DONE, timeout=20)
-
-
-@pytest.mark.parametrize(
-    ("fault", "reason"),
-    [("sim_faults.error_code=42", "42"), ("sim_faults.stuck_at_pct=30.0", "stuck")],
-)
-def test_device_errors_are_reported_not_hidden(
-    procs: Procs,
-    router_endpoint: str,
-    client_bus: Bus,
-    tmp_path: Path,
-    fault: str,
-    reason: str,
-) -> None:
-    serve_render(client_bus)
-    status = client_bus.latest(keys.SCANNER_STATUS)
-    start(procs, router_endpoint, client_bus, tmp_path, fault, "stuck_timeout_s=1.0")
-    start_scan(client_bus, 5)
-    err = status.wait_for(lambda s: s.state != ScannerState.SCANNING and s.scan_id == 5, timeout=20)
-    assert err is not None and err.state == ScannerState.ERROR, err
-    assert reason in err.error and err.file == ""
-
-
 def test_a_scan_that_cannot_be_stored_fails(
     procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
 ) -> None:
@@ -124,16 +90,6 @@ def test_a_scan_that_cannot_be_stored_fails(
     start_scan(client_bus, 9)
     err = status.wait_for(lambda s: s.state in (ScannerState.ERROR, ScannerState.DONE), timeout=20)
     assert err is not None and err.state == ScannerState.ERROR
-
-
-def test_no_ack_is_a_clear_error_within_the_timeout(
-    procs: Procs, router_endpoint: str, client_bus: Bus, tmp_path: Path
-) -> None:
-    start(procs, router_endpoint, client_bus, tmp_path, "sim_faults.no_ack=true")
-    # an error reply naming the ACK: a scanner retrying without end would leave every
-    # call unanswered (RpcTimeout, "no reply"), until start_scan's 10 s
-    with pytest.raises(RpcError, match=r"scanner: .*ACK"):
-        start_scan(client_bus, 1)
 
 
 def test_bad_resolution_is_rejected_with_the_field_named(
