@@ -21,12 +21,12 @@ from common import keys
 from common.messages.base import BaseStatus, EStop, Odometry, Twist
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.robot import default_robot
-from common.ros2 import msgs as ros
-from common.ros2.node import Ros2Node
-from common.ros2.types import ODOMETRY, TWIST
 from common.streams import Publisher
 from common.transport import Bus
 from services.base.config import BaseConfig
+from services.base.ros2 import msgs as ros
+from services.base.ros2.node import Ros2Node
+from services.base.ros2.types import ODOMETRY, TWIST
 from services.base.service import BaseService
 from services.base.sim.husky import HuskySim, HuskySimConfig
 from tests.conformance.conftest import context, sessions
