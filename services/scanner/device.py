@@ -6,6 +6,7 @@ on the scanner's card. :func:`open_device` opens the one the config names.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
@@ -19,6 +20,8 @@ from services.scanner.slcan_host import SlcanHost
 
 __all__ = ["BusOffGate", "CanDevice", "Device", "open_device", "scan_path"]
 
+log = logging.getLogger(__name__)
+
 # the emulated scan advances this often (sim time): twice its status period of 0.1 s
 TICK_HZ = 20.0
 
@@ -30,6 +33,7 @@ class CanDevice:
     project = ""  # the scan project the next scans go to (set by the service)
 
     def __init__(self, ctx: Context, cfg: ScannerConfig) -> None:
+        self.name = f"{cfg.interface} channel {cfg.channel!r}"
         try:
             if cfg.interface == "slcan":
                 self.bus: can.BusABC = SlcanHost(
@@ -53,7 +57,12 @@ class CanDevice:
         return "" if state == can.BusState.ACTIVE else f"bus state {state.name}"
 
     def close(self) -> None:
-        self.bus.shutdown()
+        """Shut the bus; an adapter already gone (unplugged, its pty closed) is said in
+        one line, not a traceback that ends the service's stop."""
+        try:
+            self.bus.shutdown()
+        except (can.CanError, OSError) as exc:
+            log.warning("scanner: CAN %s did not close cleanly: %s", self.name, exc)
 
 
 class BusOffGate(can.BusABC):

@@ -251,3 +251,38 @@ def test_bus_off_shows_on_the_wire_as_adapter_flags_and_refused_frames() -> None
         rig.close()
     adapter_lines = [line for side, line in rig.wire if side == "adapter"]
     assert b"FA6\r" in adapter_lines and b"F00\r" in adapter_lines
+
+
+class _GoneAdapter(can.BusABC):
+    """A bus whose adapter went before it was closed (unplugged, its pty shut)."""
+
+    def __init__(self) -> None:
+        super().__init__(channel="gone")
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        raise can.CanOperationError("gone")
+
+    def _recv_internal(self, timeout: float | None) -> tuple[None, bool]:
+        return None, False
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        raise can.CanOperationError("Input/output error")
+
+
+def test_a_device_whose_adapter_is_gone_closes_with_one_line(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    from common.service import Context
+    from services.scanner.config import ScannerConfig
+    from services.scanner.device import CanDevice
+
+    ctx = Context("scanner", "test", None, None, logging.getLogger("t"), Path("."))  # type: ignore[arg-type]
+    dev = CanDevice(ctx, ScannerConfig(backend="can", interface="virtual", channel="gone-adapter"))
+    dev.bus.shutdown()
+    dev.bus = _GoneAdapter()
+    with caplog.at_level(logging.WARNING):
+        dev.close()  # no traceback ends the service's stop
+    assert [r.getMessage() for r in caplog.records] == [
+        "scanner: CAN virtual channel 'gone-adapter' did not close cleanly: Input/output error"
+    ]
