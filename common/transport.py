@@ -67,6 +67,7 @@ class Bus:
         self.callback_stats = DecodeStats()
         self._reports: dict[str, Callable[[], int]] = {}
         self._handles: list[Any] = []
+        self._closing = False
         self._pool = ThreadPoolExecutor(max_workers=rpc_workers, thread_name_prefix=f"{name}-rpc")
         # lockstep with the simulator (common/lockstep.py): off unless use_lockstep
         self._inbox: Inbox | None = None
@@ -104,6 +105,9 @@ class Bus:
         first failure per key is logged with its traceback, later ones only counted,
         so a stream of bad input cannot flood the log."""
         exc = sys.exc_info()[1]
+        if self._closing and isinstance(exc, zenoh.ZError):  # a callback caught by close()
+            log.debug("%s for %s ended with the bus: %s", what, key, exc)
+            return
         reason = (str(exc).splitlines() or [""])[0] or type(exc).__name__
         if self.callback_stats.record(key, f"{what} raised {type(exc).__name__}: {reason}"):
             log.exception("%s for %s failed (later failures on it are only counted)", what, key)
@@ -281,6 +285,7 @@ class Bus:
             self._handles.append(self.session.declare_subscriber(key, on_sample))
 
     def close(self) -> None:
+        self._closing = True  # a callback still running may find its publisher gone
         for h in reversed(self._handles):
             # RuntimeError: a callback of this handle is running right now (a token
             # going as its service stops); closing the session drops it all the same
