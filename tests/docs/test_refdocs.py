@@ -32,11 +32,6 @@ PENDING = {
     "services.gnss.sim.config.ReachFaults",
     "services.gnss.sim.config.ReachOutput",
     "services.gnss.sim.config.ReachSimConfig",
-    "services.register.config.RegisterRunConfig",
-    "services.register.pipeline.RegisterConfig",
-    "services.register.refine.RefineConfig",
-    "services.register.spheres.SphereConfig",
-    "services.register.targets.TargetConfig",
     "services.scanner.sim.config.FaroSimConfig",
     "services.scanner.sim.faults.FaroFaults",
     "services.sim.faults.Multipath",
@@ -57,7 +52,6 @@ PENDING = {
     "services.sim.world.CylinderObstacle",
     "services.sim.world.SoilZone",
     "services.sim.world.WorldConfig",
-    "services.viz.config.VizConfig",
 }
 
 
