@@ -25,20 +25,6 @@ ROOTS = (
 # config Structs whose options are still documented by hand (class docstring or comments);
 # it may only shrink: convert one, take it out
 PENDING = {
-    "services.base.sim.husky.HuskySimConfig",
-    "services.gnss.rtk_model.CanopyConfig",
-    "services.gnss.rtk_model.RtkModelConfig",
-    "services.gnss.rtk_model.StateNoise",
-    "services.gnss.sim.config.ReachFaults",
-    "services.gnss.sim.config.ReachOutput",
-    "services.gnss.sim.config.ReachSimConfig",
-    "services.scanner.sim.config.FaroSimConfig",
-    "services.scanner.sim.faults.FaroFaults",
-    "services.sim.faults.Multipath",
-    "services.sim.faults.OdometryFreeze",
-    "services.sim.faults.RtkFloat",
-    "services.sim.faults.RtkOutage",
-    "services.sim.faults.TransientObstacle",
     "services.sim.foliage.FoliageConfig",
     "services.sim.imu.ImuConfig",
     "services.sim.lidar.LidarConfig",
@@ -139,3 +125,9 @@ def test_a_bad_marker_is_one_line(tmp_path: Path) -> None:
     )
     with pytest.raises(refdocs.RefDocsError, match=r"^t.md: services.nope.Config: no such"):
         refdocs.run(tmp_path, check=True)
+
+
+def test_a_text_default_is_a_toml_string() -> None:
+    from phenorover.refdocs_tables import toml
+
+    assert toml('a"\\b\r\n\x00\xff') == '"a\\"\\\\b\\r\\n\\u0000\\u00ff"'
