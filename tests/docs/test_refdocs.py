@@ -26,13 +26,7 @@ ROOTS = (
 # it may only shrink: convert one, take it out
 PENDING = {
     "services.sim.foliage.FoliageConfig",
-    "services.sim.imu.ImuConfig",
-    "services.sim.lidar.LidarConfig",
-    "services.sim.render.FaroNoise",
-    "services.sim.render.ScanSettings",
-    "services.sim.robot.RobotConfig",
     "services.sim.targets.TargetConfig",
-    "services.sim.terrain.TerrainConfig",
     "services.sim.trial.TrialConfig",
     "services.sim.world.BoxObstacle",
     "services.sim.world.CylinderObstacle",
