@@ -33,22 +33,25 @@ MARGIN = 1.25
 
 
 class Battery(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """A robot's battery and what it draws. ``capacity_wh``: the energy of a full
-    battery; ``standby_w``: the platform standing, powered; ``payload_w``: what it
-    carries (computers, receivers, the scanner); ``drive_w``: more while the wheels
-    turn; ``reserve``: the fraction of the capacity never to be used (the charge a
-    swap must come before); ``swap_s``: how long a swap takes once the robot waits
-    at the Origin; ``voltage_v``: the pack's nominal voltage (the model counts charge
-    at a constant voltage). The defaults are the Husky A200's (``common/robots/husky.toml``
-    says where each comes from)."""
+    """A robot's battery and what it draws (:attr:`common.robot.Robot.battery`). The
+    defaults are the Husky A200's (``common/robots/husky.toml`` says where each comes
+    from)."""
 
     capacity_wh: Energy = 480.0
+    """The energy of a full battery (Wh)."""
     standby_w: Power = 60.0
+    """The draw of the platform standing, powered (W)."""
     payload_w: Power = 40.0
+    """The draw of what it carries: computers, receivers, the scanner (W)."""
     drive_w: Power = 100.0
+    """The draw on top while the wheels turn (W)."""
     reserve: Fraction = 0.2
+    """The fraction of the capacity never to be used: the charge a swap must come
+    before."""
     swap_s: Seconds = 600.0
+    """How long a swap takes once the robot waits at the Origin (s)."""
     voltage_v: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 24.0
+    """The pack's nominal voltage (V): the model counts charge at a constant voltage."""
 
     def power_w(self, moving: bool) -> float:
         """What the robot draws (W), its wheels turning or not."""

@@ -3,9 +3,9 @@
 A plot file is a FeatureCollection of Polygon features in WGS84 (lon, lat), one per plot,
 optionally with a ``height`` property (metres) and field-book properties (``plot``,
 ``entry``, ``rep`` and their aliases: :func:`common.fieldbook.from_properties`). A foreign
-member ``"phenorover"`` holds settings (:class:`GeoSettings`); without ``row_bearing_deg``
-the bearing is taken from the longest edge of the first polygon. Polygons must be
-axis-aligned rectangles once rotated by the row bearing.
+member ``"phenorover"`` holds settings (:class:`common.field_geosettings.GeoSettings`);
+without ``row_bearing_deg`` the bearing is taken from the longest edge of the first
+polygon. Polygons must be axis-aligned rectangles once rotated by the row bearing.
 
 Where a field is on the globe (:func:`placed`): a field that gives its origin is there.
 A field that gives none is refused by a real deployment (GNSS would place the robot in
@@ -16,10 +16,9 @@ service of a deployment applies when it loads the field frame, so all agree.
 
 from __future__ import annotations
 
-import datetime
 import math
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any, Literal
 
 import msgspec
 import numpy as np
@@ -29,39 +28,14 @@ from common import fieldbook
 from common.arrays import F64
 from common.clock import SimClock
 from common.field import assemble, field_path, load_field
+from common.field_geosettings import GeoSettings
 from common.field_model import (
     MAX_PLOTS,
-    Altitude,
-    Corner,
     Field,
     FieldError,
     FieldLayout,
-    NonNeg,
-    Pos,
-    Voxel,
-    default_half_length,
-    default_half_width,
 )
 from common.geo import FieldFrame
-
-
-class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Settings that polygons cannot carry (see :class:`common.field.FieldLayout`)."""
-
-    name: str = "field"
-    row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] | None = None
-    plot_height: Pos = 1.0
-    headland_width: Pos = 2.0
-    edge_width: Pos = 1.5
-    voxel_x: Voxel = 0.5
-    voxel_y: Voxel = 0.5
-    voxel_z: Voxel = 0.33
-    min_scan_distance: NonNeg = 0.6
-    robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
-    robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
-    origin_alt: Altitude = 0.0
-    start_corner: Corner = "bottom-right"
-    planting_date: datetime.date | None = None
 
 
 class _Polygon(msgspec.Struct, frozen=True):

@@ -55,14 +55,18 @@ BookPath = Annotated[str, msgspec.Meta(min_length=1, max_length=4096)]
 
 
 class PlotRecord(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """One line of a field book (Breedbase convention): row 1 is the bottom row of plots
-    (field row index 0, smallest y), column 1 the leftmost plot of a row (smallest x)."""
+    """One line of a field book, keyed by plot, as Breedbase and field-book apps keep it."""
 
-    plot: PlotId  # plot id / field-book number, unique in the field
+    plot: PlotId
+    """The plot's id or field-book number, unique in the field."""
     row: PosInt
+    """The plot's row: 1 is the bottom row of plots (field row index 0, smallest y)."""
     column: PosInt
-    entry: EntryName = ""  # entry / genotype / accession name ("" = none)
-    rep: Annotated[int, msgspec.Meta(ge=1, le=10_000)] | None = None  # replicate or block
+    """The plot's place in its row: 1 is the leftmost plot of a row (smallest x)."""
+    entry: EntryName = ""
+    """The entry (genotype, accession name) sown in the plot; empty: none."""
+    rep: Annotated[int, msgspec.Meta(ge=1, le=10_000)] | None = None
+    """The replicate or block."""
 
 
 Book = Annotated[tuple[PlotRecord, ...], msgspec.Meta(max_length=MAX_PLOTS)]
@@ -80,53 +84,69 @@ def default_half_width() -> float:
 
 class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A regular plot-based breeding field, as a breeder describes it (metres, degrees).
-
-    ``row_spacing`` is the free gap between neighbouring rows of plots (the between-rows
-    lanes), ``alley_width`` the free gap between consecutive plots of a row (the cross
-    lanes), ``headland_width`` the free strip beyond both row ends and ``edge_width`` the
-    free strip beyond the two outer rows (default: ``headland_width``). Plots are cut
-    into ``voxel_*`` cells. A lane intersection is a candidate scan location when the
-    scanner is at least ``min_scan_distance`` (horizontally) from every plot and the robot
-    footprint (``robot_half_length`` x ``robot_half_width``; by default half the robot
-    description's footprint, the paper's Husky A200) fits
-    there facing along one of the two lanes. ``origin_*`` (WGS84) georeference the
-    field frame origin; ``row_bearing_deg`` is the bearing of the field x axis, degrees
-    clockwise from north. ``start_corner`` is where tours start and end (the paper's
-    Origin is the bottom-right corner). ``targets``: the registration spheres as the
-    surveyor set them out, ``[x, y, pole_height]`` each (field frame, m).
-
-    ``field_book``: one :class:`PlotRecord` per plot (plot id, row, column, entry, rep),
-    in TOML an array of tables ``[[field_book]]``, or a string: the path of a CSV file
-    relative to the TOML file's folder, which :func:`common.field.load_field` replaces
-    by its records (see :mod:`common.fieldbook`); empty: no book. ``planting_date``:
-    the day the trial was sown (TOML local date ``2026-05-01``); the simulator grows
-    plants by days after planting.
-    """
+    A lane intersection is a candidate scan location when the scanner is at least
+    ``min_scan_distance`` (horizontally) from every plot and the robot footprint
+    (``robot_half_length`` x ``robot_half_width``) fits there facing along one of the
+    two lanes."""
 
     name: str = "field"
+    """The field's name."""
     rows: PosInt
+    """Rows of plots (the grid's y)."""
     plots_per_row: PosInt
+    """Plots in each row (the grid's x)."""
     plot_length: Pos
+    """One plot's box along the row, x (m)."""
     plot_width: Pos
+    """One plot's box across the row, y (m)."""
     plot_height: Pos
+    """One plot's box up (m): the canopy's height at the stage surveyed."""
     row_spacing: Pos
+    """The free gap between neighbouring rows of plots: the between-rows lanes (m)."""
     alley_width: Pos
+    """The free gap between consecutive plots of a row: the cross lanes (m)."""
     headland_width: Pos
+    """The free strip beyond both row ends (m)."""
     edge_width: Pos | None = None
+    """The free strip beyond the two outer rows (m); none: ``headland_width``."""
     voxel_x: Voxel = 0.5
+    """The cells' size along x (m); the paper's cell is 0.5 x 0.5 x 0.33 m."""
     voxel_y: Voxel = 0.5
+    """The cells' size along y (m)."""
     voxel_z: Voxel = 0.33
+    """The cells' size up (m)."""
     min_scan_distance: NonNeg = 0.6
+    """The scanner's least horizontal distance to any plot at a candidate (m; the FARO's
+    minimum range)."""
     robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
+    """Half the length of the footprint that must fit at a candidate (m); by default half
+    the robot description's ``[footprint]`` (the Husky A200's)."""
     robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
+    """Half the width of the footprint that must fit at a candidate (m); by default half
+    the robot description's ``[footprint]``."""
     origin_lat: Annotated[float, msgspec.Meta(ge=-90, le=90)] | None = None
+    """WGS84 latitude of the field frame's origin (deg); without ``origin_lat`` and
+    ``origin_lon`` the field has no georeference (docs/configuration.md)."""
     origin_lon: Annotated[float, msgspec.Meta(ge=-180, le=180)] | None = None
+    """WGS84 longitude of the field frame's origin (deg)."""
     origin_alt: Altitude = 0.0
+    """Height of the field frame's origin above the WGS84 ellipsoid (m)."""
     row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
+    """Bearing of the field frame's +x axis (along the rows), degrees clockwise from
+    north."""
     start_corner: Corner = "bottom-right"
+    """Where tours start and end; ``bottom-right`` is the paper's Origin."""
     targets: tuple[Site, ...] = ()
+    """The registration spheres as the surveyor set them out, ``[x, y, pole_height]`` each
+    (field frame, m); the simulator stands its spheres there."""
     field_book: BookPath | Book = ()
+    """The field book, one :class:`PlotRecord` per plot: ``[[field_book]]`` tables, or the
+    path of a CSV file relative to the field file's folder, which
+    :func:`common.field.load_field` replaces by its records (:mod:`common.fieldbook`);
+    empty: no book, plots numbered from 1 in plot order."""
     planting_date: datetime.date | None = None
+    """The day the trial was sown (TOML local date ``2026-05-01``): the simulator grows a
+    trial to a survey date from it, the traits count days after it."""
 
     @property
     def georeferenced(self) -> bool:

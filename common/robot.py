@@ -46,13 +46,16 @@ MIN_BASELINE_M = 0.1
 
 
 class GnssAntenna(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """A GNSS antenna: ``x``, ``y``, ``z`` of its phase centre in base_link (m).
-    ``name`` is its frame (``gnss_1``)."""
+    """A GNSS antenna's phase centre (:attr:`Robot.antennas`)."""
 
     name: Name
+    """The antenna's frame (``gnss_1``)."""
     x: Coord
+    """The phase centre's x in base_link (m)."""
     y: Coord
+    """The phase centre's y in base_link (m)."""
     z: Coord
+    """The phase centre's z in base_link (m)."""
 
     @property
     def xyz(self) -> tuple[float, float, float]:
@@ -60,14 +63,17 @@ class GnssAntenna(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
 
 
 class ScannerMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The TLS: its optical centre in base_link (m) and ``yaw_deg``, its zero azimuth
-    from base_link x. Its tilt is not described: the scanner's own compensator
-    measures pitch and roll at every scan."""
+    """The TLS's mount (:attr:`Robot.scanner`)."""
 
     x: Coord
+    """The optical centre's x in base_link (m)."""
     y: Coord
-    z: Size  # the planner casts its rays from this height above the ground
+    """The optical centre's y in base_link (m)."""
+    z: Size
+    """The optical centre's height in base_link (m): the planner casts its rays from this
+    height above the ground."""
     yaw_deg: Angle = 0.0
+    """The scanner's zero azimuth from base_link x (deg)."""
 
     @property
     def xyz(self) -> tuple[float, float, float]:
@@ -79,13 +85,16 @@ class ScannerMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
 
 class LidarMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The 2D lidar: the centre of its scan plane in base_link (m) and ``yaw_deg``, the
-    direction of its 0-degree beam from base_link x; the plane is level with base_link."""
+    """The 2D lidar's mount (:attr:`Robot.lidar`)."""
 
     x: Coord
+    """The scan plane's centre's x in base_link (m)."""
     y: Coord
+    """The scan plane's centre's y in base_link (m)."""
     z: Coord
+    """The scan plane's height in base_link (m)."""
     yaw_deg: Angle = 0.0
+    """The direction of its 0-degree beam from base_link x (deg)."""
 
     @property
     def xyz(self) -> tuple[float, float, float]:
@@ -97,15 +106,20 @@ class LidarMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 
 
 class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The IMU: its origin in base_link (m) and its orientation (ZYX Euler angles,
-    degrees). Navigation turns the unit's roll and pitch into base_link's with it."""
+    """The IMU's mount (:attr:`Robot.imu`)."""
 
     x: Coord = 0.0
+    """The unit's origin's x in base_link (m)."""
     y: Coord = 0.0
+    """The unit's origin's y in base_link (m)."""
     z: Coord = 0.0
+    """The unit's origin's z in base_link (m)."""
     roll_deg: Angle = 0.0
+    """The unit's roll in base_link (deg)."""
     pitch_deg: Angle = 0.0
+    """The unit's pitch in base_link (deg)."""
     yaw_deg: Angle = 0.0
+    """The unit's yaw in base_link (deg)."""
 
     @property
     def roll_rad(self) -> float:
@@ -121,41 +135,57 @@ class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
 
 
 class Footprint(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The body as a box centred on base_link in x and y, standing on the ground:
-    ``length`` along x, ``width`` along y, ``height`` up (m)."""
+    """The body's box (:attr:`Robot.footprint`)."""
 
     length: Size
+    """The box along x (m)."""
     width: Size
+    """The box along y (m)."""
     height: Size
+    """The box up (m)."""
 
 
 class Limits(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """What the drivetrain can do: linear and angular speed (m/s, rad/s) and
-    acceleration (m/s^2, rad/s^2)."""
+    """What the drivetrain can do (:attr:`Robot.limits`)."""
 
     max_speed: Speed
+    """The fastest linear speed (m/s)."""
     max_turn_rate: Speed
+    """The fastest turn rate (rad/s)."""
     max_accel: Accel
+    """The largest linear acceleration (m/s²)."""
     max_turn_accel: Accel
+    """The largest angular acceleration (rad/s²)."""
 
 
 class Robot(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """One robot. ``antennas``: the two GNSS antennas, antenna 1 first (its fixes are
-        ``gnss/1/fix``); the compass heading is that of the 1 -> 2 vector less its yaw in
-        base_link. ``track``: distance between the left and right wheels' contact lines;
-        ``wheelbase``: between the front and rear axles (m). ``battery``: what it carries
-    and draws (:class:`common.battery.Battery`)."""
+    """One robot."""
 
     name: Name
+    """The robot's name."""
     antennas: tuple[GnssAntenna, GnssAntenna]
+    """The two GNSS antennas, antenna 1 first (its fixes are ``gnss/1/fix``); the compass
+    heading is that of the 1 -> 2 vector less its yaw in base_link."""
     scanner: ScannerMount
+    """The TLS: its optical centre and zero azimuth. Its tilt is not described: the
+    scanner's own compensator measures pitch and roll at every scan."""
     lidar: LidarMount
+    """The 2D lidar: its scan plane, level with base_link, and its 0-degree beam."""
     imu: ImuMount = ImuMount()
+    """The IMU's mount (ZYX Euler angles): navigation turns the unit's roll and pitch
+    into base_link's through it."""
     footprint: Footprint
+    """The body as a box centred on base_link in x and y, standing on the ground."""
     track: Size
+    """The distance between the left and right wheels' contact lines (m)."""
     wheelbase: Size
+    """The distance between the front and rear axles (m)."""
     limits: Limits
+    """What the drivetrain can do: the base clips commands to it, and navigation refuses
+    a follower set faster."""
     battery: Battery = Battery()
+    """What it carries and draws: the simulator discharges by it, the planner and the
+    mission plan the swaps with it (:mod:`common.battery`)."""
 
     def __post_init__(self) -> None:
         a, b = self.antennas

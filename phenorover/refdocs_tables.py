@@ -49,9 +49,14 @@ def _module_docstrings(module: str) -> dict[tuple[str, str], str]:
 
 
 def field_docs(cls: type) -> dict[str, str]:
-    """Each field of ``cls`` (a msgspec Struct) -> its attribute docstring ("" if none)."""
-    docs = _module_docstrings(cls.__module__)
-    return {f.name: docs.get((cls.__name__, f.name), "") for f in msgspec.structs.fields(cls)}
+    """Each field of ``cls`` (a msgspec Struct) -> its attribute docstring ("" if none),
+    found in the class that declares the field (``cls`` or a base)."""
+    found: dict[str, str] = {}
+    for base in reversed(cls.__mro__):
+        if issubclass(base, msgspec.Struct) and base is not msgspec.Struct:
+            docs = _module_docstrings(base.__module__)
+            found |= {name: doc for (c, name), doc in docs.items() if c == base.__name__}
+    return {f.name: found.get(f.name, "") for f in msgspec.structs.fields(cls)}
 
 
 def number(v: float) -> str:
@@ -68,6 +73,14 @@ def number(v: float) -> str:
     return repr(v)
 
 
+_ESCAPES = {"\\": "\\\\", '"': '\\"', "\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def _escape(c: str) -> str:
+    """A character of a TOML basic string: printable ASCII as itself, else escaped."""
+    return c if " " <= c <= "~" else f"\\u{ord(c):04x}"
+
+
 def toml(v: Any) -> str:
     """A plain value (msgspec builtins) written the TOML way, on one line."""
     if v is None:
@@ -77,7 +90,7 @@ def toml(v: Any) -> str:
     if isinstance(v, int | float):
         return number(v)
     if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        return '"' + "".join(_ESCAPES.get(c) or _escape(c) for c in v) + '"'
     if isinstance(v, list):
         return "[" + ", ".join(toml(x) for x in v) + "]"
     if isinstance(v, dict):

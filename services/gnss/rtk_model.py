@@ -51,28 +51,33 @@ class StateNoise(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     """1-sigma error of one solution state: ``const_m + ppm * 1e-6 * baseline``."""
 
     h_const_m: NonNegative
+    """The horizontal 1-sigma's constant part, per axis (m)."""
     h_ppm: NonNegative = 1.0
+    """The horizontal 1-sigma's part proportional to the baseline (ppm)."""
     v_const_m: NonNegative
+    """The vertical 1-sigma's constant part (m)."""
     v_ppm: NonNegative = 1.0
+    """The vertical 1-sigma's part proportional to the baseline (ppm)."""
     correlation_time_s: Positive = 2.0
+    """The correlation time of the error's Gauss-Markov process (s)."""
 
 
 class CanopyConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """RTK under a crop: a receiver whose sky is ``blocked`` (0-1, the share of the
     sky above its elevation mask the plots hide; the simulator computes it, see
     :mod:`services.sim.sky`) tracks fewer satellites, through leaves and with
-    reflections off them. Its fixed solution's error grows by ``noise_gain x
-    blocked`` (1-sigma and GST alike) and it loses the fix ``float_gain x blocked``
-    times more often. The mechanism is the paper's geometry (antennas at 1.1 m among
-    1.9 m plants); the noise gain is an assumption, calibrated so that the paper's own
-    navigation reproduces its field cross-track errors in our simulator (8: a fix
-    three times as noisy in a 1.5 m alley, a quarter of whose sky the plots hide; see
-    docs/simulation.md). The fix loss is left at open-sky rates: both navigations
-    stand still through float (they fuse RTK-fixed positions only), so cross-track
-    errors cannot calibrate it."""
+    reflections off them. The mechanism is the paper's geometry (antennas at 1.1 m
+    among 1.9 m plants)."""
 
     noise_gain: NonNegative = 8.0
+    """The fixed solution's error grows by ``1 + noise_gain x blocked`` (1-sigma and GST
+    alike). An assumption, calibrated so that the paper's own navigation reproduces its
+    field cross-track errors in our simulator (8: a fix three times as noisy in a 1.5 m
+    alley, a quarter of whose sky the plots hide; docs/simulation.md)."""
     float_gain: NonNegative = 0.0
+    """The fix is lost ``1 + float_gain x blocked`` times as often. Left at open-sky
+    rates: both navigations stand still through float (they fuse RTK-fixed positions
+    only), so cross-track errors cannot calibrate it."""
 
 
 def _rates(dwell_s: tuple[float, ...], exits: tuple[tuple[float, ...], ...]) -> list[list[float]]:
@@ -92,24 +97,28 @@ _DEFAULT_RATES = _rates(
 
 
 class RtkModelConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Configuration of :class:`RtkErrorModel`; defaults are sourced in the module doc.
-
-    ``rates_per_s[i][j]`` is the rate (1/s) of jumping from ``STATES[i]`` to
-    ``STATES[j]``; the diagonal is ignored.
-    """
+    """Configuration of :class:`RtkErrorModel`; defaults are sourced in the module doc."""
 
     fix: StateNoise = StateNoise(h_const_m=0.007, v_const_m=0.014, correlation_time_s=2.0)
+    """The error of an RTK-fixed solution."""
     float_: StateNoise = msgspec.field(
         name="float",
         default=StateNoise(h_const_m=0.25, v_const_m=0.5, correlation_time_s=30.0),
     )
+    """The error of an RTK-float solution."""
     single: StateNoise = StateNoise(
         h_const_m=1.2, h_ppm=0.0, v_const_m=2.4, v_ppm=0.0, correlation_time_s=120.0
     )
+    """The error of a single-point solution."""
     rates_per_s: list[list[NonNegative]] = msgspec.field(default_factory=lambda: _DEFAULT_RATES)
+    """``rates_per_s[i][j]`` is the rate (1/s) of jumping from ``STATES[i]`` to
+    ``STATES[j]`` (FIX, FLOAT, SINGLE, NO_FIX); the diagonal is ignored."""
     initial_state: FixQuality = FixQuality.FIX
+    """The solution state at the start (a GGA fix quality)."""
     baseline_m: NonNegative = 400.0
+    """The distance to the RTK base station (m), which the ``*_ppm`` terms scale."""
     canopy: CanopyConfig = msgspec.field(default_factory=CanopyConfig)
+    """RTK under the crop."""
 
     def __post_init__(self) -> None:
         n = len(STATES)

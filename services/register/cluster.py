@@ -19,8 +19,9 @@ from pathlib import Path
 from common.cluster import Cluster, file_stamp
 from common.pointcloud import read_e57
 from common.poses import F64
+from services.register.config import RefineConfig
 from services.register.graph import PairResult
-from services.register.refine import Prepared, RefineConfig, align_pair, prepare
+from services.register.refine import Prepared, align_pair, prepare
 
 log = logging.getLogger(__name__)
 

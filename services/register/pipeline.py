@@ -14,15 +14,14 @@ import math
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
 
-import msgspec
 import numpy as np
 import numpy.typing as npt
 from scipy.spatial import cKDTree
 
 from common.pointcloud import PosedScan, read_e57
 from common.poses import F64, check_pose
+from services.register.config import RegisterConfig
 from services.register.graph import TargetObservation, optimise_graph
 from services.register.metrics import (
     cloud_distance,
@@ -43,36 +42,19 @@ from services.register.outcome import (
 from services.register.refine import (
     PairsBy,
     Prepared,
-    RefineConfig,
     prepare,
     prior_sigmas,
     refine,
     select_pairs,
 )
-from services.register.spheres import SphereConfig, SphereDetection, detect_spheres
+from services.register.spheres import SphereDetection, detect_spheres
 from services.register.targets import (
-    TargetConfig,
     TargetSolution,
     match_targets,
     solve_targets,
 )
 
 log = logging.getLogger(__name__)
-
-
-class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Everything :func:`register` takes. ``sample_points``: per-scan uniform
-    subsample for the scan point statistics; ``cloud_points``: source points for the
-    cloud-to-cloud distances."""
-
-    refine: RefineConfig = RefineConfig()
-    spheres: SphereConfig = SphereConfig()
-    targets: TargetConfig = TargetConfig()
-    sample_points: int = 5000
-    cloud_points: int = 20000
-    # the overlap residuals' search radius (m): the paper's C2C searched 30 cm
-    overlap_radius: Annotated[float, msgspec.Meta(gt=0, le=1.0)] = 0.3
-    seed: int = 0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

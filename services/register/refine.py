@@ -35,70 +35,18 @@ import dataclasses
 import logging
 import math
 from collections.abc import Callable
-from typing import Annotated
 
-import msgspec
 import numpy as np
 import small_gicp
 from scipy.spatial import cKDTree
 
-from common.messages.core import Positive
 from common.poses import F64, apply, inv
 from common.workers import starmap
+from services.register.config import RefineConfig
 from services.register.graph import PairResult, TargetObservation, optimise_graph
 from services.register.poses import difference
 
 log = logging.getLogger(__name__)
-
-
-class RefineConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """C2C refinement (metres, degrees). Navigation sigmas are the pose graph's prior
-    (1 sigma of the navigation pose error the graph may correct)."""
-
-    voxel: Positive = 0.05
-    max_range: Positive = 30.0
-    neighbours: Annotated[int, msgspec.Meta(ge=5)] = 20
-    max_pair_distance: Positive = 10.0
-    coarse_correspondence: Positive = 0.3
-    fine_correspondence: Positive = 0.1
-    max_iterations: Annotated[int, msgspec.Meta(ge=1)] = 100
-    # GICP stops when a step is below these (small_gicp's 0.1 deg / 1 mm defaults stop
-    # early on the weakly constrained along-lane direction)
-    epsilon: Positive = 1e-5
-    view_angle_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 45.0
-    ground_normal_z: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.9
-    # a pair is used when this share of its source points finds a correspondence
-    # (low-overlap pairs across the plots converge to wrong minima in simulation)
-    min_overlap: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.3
-    # and when each component of its correction stays within gate_sigma relative
-    # navigation sigmas (sqrt(2) nav sigmas)
-    gate_sigma: Positive = 4.0
-    # floor of the point-to-plane residual sigma that scales the pair information
-    # (the pair's own RMSE is used when larger)
-    point_sigma: Positive = 0.01
-    # residuals on plants are correlated over a plant, not independent per point: the
-    # pair information counts one point per cube of this size (0: every point), so a
-    # pair of 20 000 points is not trusted to a fraction of a millimetre and cannot
-    # override the navigation prior with its own bias (the field's cell size)
-    independent_voxel: Annotated[float, msgspec.Meta(ge=0)] = 0.5
-    # the navigation prior is what the scan's navigation pose is worth: its position
-    # fixes the graph's rotation as well as its place (scans tens of metres apart,
-    # each placed to millimetres, hold the whole block's heading better than any one
-    # compass reading). Ours, the estimate at the scan's end after minutes of standing
-    # (filter SD 3-5 mm under the crop; 3-4 mm against the truth in the simulated
-    # ENGR surveys): 5 mm. A filter that forgets while standing (the paper's) is
-    # worth about 2 cm, and its profile says so
-    nav_sigma_xy: Positive = 0.005
-    nav_sigma_z: Positive = 0.05
-    nav_sigma_tilt_deg: Positive = 0.1
-    nav_sigma_yaw_deg: Positive = 0.3
-    # scan pairs aligned at once, each in its own single-threaded process (see
-    # .workers: why not OpenMP threads); the poses do not depend on it
-    threads: Annotated[int, msgspec.Meta(ge=1)] = 2
-    # sphere centres seen by two or more scans join the pose graph (a user has the
-    # targets; the paper's C2C did without them); 1 sigma of a fitted centre
-    use_targets: bool = True
-    target_sigma: Positive = 0.003
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

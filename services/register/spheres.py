@@ -33,20 +33,27 @@ from common.messages.core import Positive
 
 
 class SphereConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Sphere detection (metres). The defaults suit Koppa 200 mm spheres scanned at
-    the paper's 0.36 deg step (6 mm at 1 m): ~8 points on a sphere at 10 m."""
+    """Sphere detection (``[register.spheres]``). The defaults suit Koppa 200 mm spheres
+    scanned at the paper's 0.36 deg step (6 mm at 1 m): ~8 points on a sphere at 10 m."""
 
     radius: Positive = 0.1
+    """The spheres' radius (m)."""
     min_intensity: Annotated[float, msgspec.Meta(ge=0)] = 0.6
+    """Points at least this bright (intensity 0-1) seed candidates."""
     min_points: Annotated[int, msgspec.Meta(ge=4)] = 6
-    # inlier band of the RANSAC fit and the largest accepted RMS residual
+    """The fewest points a sphere is found from."""
     inlier_threshold: Positive = 0.006
+    """The inlier band of the RANSAC fit (m)."""
     max_rms: Positive = 0.004
-    # a free-radius fit (made when there are >= free_fit_points) must agree this well
+    """The largest accepted RMS residual of a fit (m)."""
     radius_tolerance: Positive = 0.015
+    """A free-radius fit must agree with ``radius`` this well (m)."""
     free_fit_points: Annotated[int, msgspec.Meta(ge=4)] = 30
+    """A free-radius fit is made when a sphere has at least this many points."""
     ransac_iterations: Annotated[int, msgspec.Meta(ge=1)] = 200
+    """RANSAC's iterations per candidate."""
     max_range: Positive = 40.0
+    """Spheres are looked for within this distance of the scanner (m)."""
 
 
 @dataclasses.dataclass(frozen=True)

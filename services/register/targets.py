@@ -32,15 +32,22 @@ from services.register.poses import perturb
 
 
 class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Target matching and adjustment (metres, degrees)."""
+    """Target matching and adjustment, the target-based reference (``[register.targets]``)."""
 
     match_radius: Positive = 0.5
+    """Sphere centres placed by their scans' navigation poses and closer than this are
+    one target (m)."""
     sigma_target: Positive = 0.002
+    """1 sigma of a fitted sphere centre in the adjustment (m)."""
     sigma_tilt_deg: Positive = 0.02
-    # gauge only: loose enough that the targets decide the relative placement
+    """1 sigma of the prior holding a scan's tilt to the compensator's (deg)."""
     sigma_nav_m: Positive = 0.5
+    """1 sigma of the prior holding a scan's position to navigation's (m): gauge only,
+    loose enough that the targets decide the relative placement."""
     sigma_nav_yaw_deg: Positive = 5.0
+    """1 sigma of the prior holding a scan's heading to navigation's (deg), gauge only."""
     min_targets: Annotated[int, msgspec.Meta(ge=1)] = 2
+    """A scan sharing fewer targets keeps its navigation pose and is reported unsolved."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -27,10 +27,13 @@ Encoders = Literal["ok", "zero", "silent"]
 class _Window(
     msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_field="kind"
 ):
-    """A fault's window in sim seconds: from ``at_s`` for ``for_s``."""
+    """A fault's window in sim seconds."""
 
     at_s: NonNegative
+    """The fault starts this many sim seconds after the world started (the clock on
+    ``sim/clock``)."""
     for_s: Positive
+    """The fault lasts this long (sim s): on for ``at_s <= t < at_s + for_s``."""
 
     def active(self, t_s: float) -> bool:
         """On at sim time ``t_s`` (seconds)?"""
@@ -47,9 +50,10 @@ def _antennas(antenna: Antenna | None) -> str:
 
 class RtkOutage(_Window, frozen=True, kw_only=True, tag="rtk_outage"):
     """The receiver(s) send nothing at all (a cut antenna cable, a receiver
-    rebooting): ``antenna`` 1 or 2, both when unset."""
+    rebooting): no fixes, no compass heading."""
 
     antenna: Antenna | None = None
+    """The antenna whose receiver fails, 1 or 2; none: both."""
 
     def detail(self) -> str:
         return _antennas(self.antenna)
@@ -57,48 +61,56 @@ class RtkOutage(_Window, frozen=True, kw_only=True, tag="rtk_outage"):
 
 class RtkFloat(_Window, frozen=True, kw_only=True, tag="rtk_float"):
     """The receiver(s) cannot resolve ambiguities: RTK float (GGA quality 5) with the
-    RTK model's float noise (decimetres): ``antenna`` 1 or 2, both when unset."""
+    RTK model's float noise (decimetres) and its GST sigma."""
 
     antenna: Antenna | None = None
+    """The antenna whose receiver floats, 1 or 2; none: both."""
 
     def detail(self) -> str:
         return _antennas(self.antenna)
 
 
 class Multipath(_Window, frozen=True, kw_only=True, tag="multipath"):
-    """A lying receiver: ``antenna``'s positions jump by ``offset_m`` (east, north;
-    metres, in the local ENU plane) while it still reports its usual fix quality."""
+    """A lying receiver: an antenna's positions jump while it still reports its usual fix
+    quality and sigma."""
 
     antenna: Antenna
+    """The antenna that lies, 1 or 2."""
     offset_m: tuple[Finite, Finite]
+    """The jump ``[east, north]`` in the local ENU plane (m)."""
 
     def detail(self) -> str:
         return f"antenna {self.antenna}, offset ({self.offset_m[0]:g}, {self.offset_m[1]:g}) m"
 
 
 class OdometryFreeze(_Window, frozen=True, kw_only=True, tag="odometry_freeze"):
-    """The wheel encoders stop counting. ``zero`` (default): the encoder readings keep
-    coming at their rate but say the wheels stand still (a stuck counter or a slipped
-    encoder coupling, what a Husky's motor controller reports then; the harder case,
-    since nothing looks missing); ``silent``: no readings at all (the link to the
-    motor controller is down)."""
+    """The wheel encoders stop counting."""
 
     mode: Literal["zero", "silent"] = "zero"
+    """``zero``: the encoder readings keep coming at their rate but say the wheels stand
+    still (a stuck counter or a slipped encoder coupling, what a Husky's motor
+    controller reports then; the harder case, since nothing looks missing);
+    ``silent``: no readings at all (the link to the motor controller is down)."""
 
     def detail(self) -> str:
         return f"encoders {self.mode}"
 
 
 class TransientObstacle(_Window, frozen=True, kw_only=True, tag="obstacle"):
-    """A box standing on the ground centred at (``x``, ``y``) in the field frame
-    (metres) while the fault is on: a person or an animal passing. The 2D lidar sees
-    it; FARO scans do not (a scan is taken standing still, after it has gone)."""
+    """A box standing on the ground while the fault is on: a person or an animal
+    passing. The 2D lidar sees it; FARO scans do not (a scan is taken standing still,
+    after it has gone)."""
 
     x: Coordinate
+    """The box's centre's x in the field frame (m)."""
     y: Coordinate
+    """The box's centre's y in the field frame (m)."""
     size_x: Positive = 0.4
+    """The box along x (m)."""
     size_y: Positive = 0.4
+    """The box along y (m)."""
     height: Positive = 1.0
+    """The box's height (m)."""
 
     def box(self) -> BoxObstacle:
         return BoxObstacle(

@@ -27,10 +27,15 @@ class LidarConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     band: sigma 20 mm). Where it sits is the robot description's ``[lidar]``."""
 
     fov_deg: Annotated[float, msgspec.Meta(gt=0, le=360)] = 270.0
+    """The field of view (deg)."""
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.25
+    """The angle between beams (deg)."""
     min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.06
+    """The shortest range measured (m)."""
     max_range: Annotated[float, msgspec.Meta(gt=0)] = 5.0
+    """The longest range measured (m)."""
     sigma: Annotated[float, msgspec.Meta(ge=0)] = 0.02
+    """The range noise's 1-sigma (m)."""
 
 
 def beam_angles(cfg: LidarConfig) -> F64:

@@ -43,12 +43,19 @@ class ScanSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     horizontal, 0.36 deg steps, 0.6-70 m."""
 
     vertical_start_deg: Annotated[float, msgspec.Meta(ge=-90, le=90)] = -60.0
+    """The lowest elevation swept (deg; 0 horizontal, up positive)."""
     vertical_end_deg: Annotated[float, msgspec.Meta(ge=-90, le=90)] = 90.0
+    """The highest elevation swept (deg)."""
     horizontal_start_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
+    """The first azimuth swept (deg, counter-clockwise from the scanner's +x)."""
     horizontal_end_deg: Annotated[float, msgspec.Meta(ge=-360, le=720)] = 360.0
+    """The last azimuth swept (deg)."""
     step_deg: Annotated[float, msgspec.Meta(gt=0.005, le=45)] = 0.36
+    """The angular step between rows and between columns (deg)."""
     min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.6
+    """The shortest range measured (m)."""
     max_range: Annotated[float, msgspec.Meta(gt=0)] = 70.0
+    """The longest range measured (m)."""
 
     @classmethod
     def from_model(cls, m: ScannerModel) -> ScanSettings:
@@ -68,12 +75,19 @@ class FaroNoise(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """Range, angle and intensity errors; see the module docstring for sources."""
 
     noise_floor_mm: Annotated[float, msgspec.Meta(ge=0)] = 0.3
+    """``a`` of the ranging noise ``sigma^2 = a^2 + c * r * (0.1 / rho)^1.5`` (mm)."""
     noise_slope_mm2_per_m: Annotated[float, msgspec.Meta(ge=0)] = 0.0067
+    """``c`` of the ranging noise (mm²/m)."""
     range_bias_mm: Annotated[float, msgspec.Meta(ge=0)] = 1.0
+    """The ranging error's bound (mm): a systematic offset drawn uniformly within it,
+    once per scan."""
     angle_sigma_arcsec: Annotated[float, msgspec.Meta(ge=0)] = 19.0
-    # drop weak returns as the lidar equation says (False: keep all up to max_range)
+    """The angular accuracy per axis (arcsec, 1-sigma)."""
     reflectivity_range_limit: bool = True
+    """Drop weak returns as the lidar equation says (beyond 70 m x sqrt(rho / 0.9));
+    false: keep all up to ``max_range``."""
     intensity_noise: Annotated[float, msgspec.Meta(ge=0)] = 0.03
+    """The intensity's relative noise (1-sigma)."""
 
 
 REFLECTIVITY = {

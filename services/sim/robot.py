@@ -48,22 +48,29 @@ class RobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     5-10 cm, heading settling within its 2 deg tolerance), not measurements.
     """
 
-    # first-order lag of the motor speed loops
     tau: Positive = 0.15
+    """The first-order lag of the motor speed loops (s)."""
     slip_long: Annotated[float, msgspec.Meta(ge=0, lt=1)] = 0.01
-    # body yaw rate / wheel-implied yaw rate on firm soil (soil = 1)
+    """Longitudinal slip, a share of the wheel speed per unit soil."""
     yaw_efficiency: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.93
-    # relative random fluctuation of the yaw rate while turning (1/sqrt(Hz))
+    """The body's yaw rate over the rate the wheel speeds imply, on firm soil (soil = 1):
+    skid-steer scrubbing."""
     yaw_noise: NonNegative = 0.02
-    # std (m) and correlation time (s) of the rotation-centre offset, per unit soil
+    """The relative random fluctuation of the yaw rate while turning (1/sqrt(Hz)), per
+    unit soil."""
     icr_std: NonNegative = 0.03
+    """The SD of the rotation centre's offset from the body centre (m), per unit soil."""
     icr_tau: Positive = 2.0
-    # white lateral velocity noise while moving or turning (m/s per (m/s or rad/s))
+    """The correlation time of the rotation centre's offset (s)."""
     lateral_noise: NonNegative = 0.01
-    # wheel encoders: relative scale error (wheel radius on soil) and white noise
+    """White lateral velocity noise while moving or turning (m/s per m/s or rad/s), per
+    unit soil."""
     encoder_scale: float = 0.005
+    """The wheel encoders' relative scale error (the wheel radius on soil)."""
     encoder_v_std: NonNegative = 0.005
+    """The encoders' white noise on the linear speed (m/s)."""
     encoder_w_std: NonNegative = 0.01
+    """The encoders' white noise on the turn rate (rad/s)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -36,14 +36,18 @@ class TerrainConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     """
 
     slope_pct: Annotated[float, msgspec.Meta(ge=0, le=30)] = 1.0
-    # direction the ground rises towards, degrees CCW from the field +x axis
+    """The ground's slope (%)."""
     slope_dir_deg: float = 30.0
+    """The direction the ground rises towards, degrees CCW from the field +x axis."""
     bump_rms: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.03
+    """The bumps' RMS height (m)."""
     bump_length: Annotated[float, msgspec.Meta(gt=0, le=100)] = 1.5
-    # 25 m of ground beyond the field boundary: enough for every ground return of a
-    # scanner at 1 m height inside the field down to ~2 deg below horizontal.
+    """The bumps' correlation length (m)."""
     margin: Annotated[float, msgspec.Meta(ge=0, le=200)] = 25.0
+    """Ground beyond the field boundary (m): 25 m is enough for every ground return of
+    a scanner at 1 m height inside the field down to ~2 deg below horizontal."""
     spacing: Annotated[float, msgspec.Meta(gt=0.01, le=2)] = 0.2
+    """The height grid's spacing (m)."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

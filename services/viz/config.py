@@ -10,46 +10,51 @@ PosInt = Annotated[int, msgspec.Meta(gt=0)]
 
 
 class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The live rerun dashboard. Any combination of the three outputs may be on.
-
-    ``serve``: host rerun's gRPC server on ``bind``:``grpc_port`` and, unless
-    ``web_port`` is 0, the web viewer on ``bind``:``web_port`` (served by rerun's CLI
-    as a child process). ``advertise`` is the host name browsers reach this machine by,
-    put into the viewer link (default: ``bind``, or this machine's name when ``bind``
-    is 0.0.0.0). ``server_memory_limit`` bounds what the server keeps for viewers that
-    connect late (oldest data goes first, static data stays).
-    ``save``: an .rrd path; ``{run_dir}`` and ``{mission}`` expand, and with
-    ``{mission}`` each mission gets its own file, opened when the mission starts.
-    ``connect``: a viewer's URL (``rerun+http://host:9876/proxy``) to push into.
-    ``rate_hz``: how often new robot and mission data are logged (wall time); newer
-    messages replace older ones in between, so a slow viewer never slows the bus.
-    ``scan_points``/``registered_points``: points kept per scan / of the registered
-    cloud (random subsample). ``registered_files``: globs, in the mission's run folder,
-    of the registered cloud (LAZ in the field frame or a multi-scan E57 with poses).
-    ``trait``: which of :data:`common.canopy.TRAITS` colours the plots once the
-    mission's ``traits_file`` (in its run folder, written after registration) exists.
-    ``robots``: the namespaces of robots sharing the field, each drawn under
-    ``fleet/<namespace>/`` (:mod:`services.viz.fleet_view`).
-    """
+    """The live rerun dashboard (docs/dashboard.md). Any combination of the three
+    outputs (``serve``, ``save``, ``connect``) may be on."""
 
     robots: list[RobotName] = msgspec.field(default_factory=list)
+    """The namespaces of robots sharing the field, each drawn under ``fleet/<namespace>/``
+    (:mod:`services.viz.fleet_view`)."""
     serve: bool = False
+    """Host rerun's gRPC server on ``bind``:``grpc_port`` and, unless ``web_port`` is 0,
+    the web viewer on ``bind``:``web_port`` (served by rerun's CLI as a child process)."""
     bind: str = "0.0.0.0"
+    """The address the server and the web viewer listen on."""
     grpc_port: Port = 9876
+    """The gRPC server's port."""
     web_port: Port = 9090
+    """The web viewer's port; 0: no web viewer."""
     advertise: str = ""
+    """The host name browsers reach this machine by, put into the viewer link it logs;
+    empty: ``bind``, or this machine's name when ``bind`` is 0.0.0.0."""
     server_memory_limit: str = "1GiB"
+    """What the server keeps for viewers that connect late (oldest data goes first,
+    static data stays)."""
     save: str = ""
+    """An .rrd path to record into; ``{run_dir}`` and ``{mission}`` expand, and with
+    ``{mission}`` each mission gets its own file, opened when the mission starts."""
     connect: str = ""
+    """A viewer's URL (``rerun+http://HOST:9876/proxy``) to push into."""
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=60)] = 10.0
+    """How often new robot and mission data are logged (wall time); newer messages
+    replace older ones in between, so a slow viewer never slows the bus."""
     scan_points: PosInt = 20_000
+    """Points kept per scan (a random subsample)."""
     registered_points: PosInt = 200_000
+    """Points kept of the registered cloud (a random subsample)."""
     registered_files: list[str] = msgspec.field(
         default_factory=lambda: ["registered*.laz", "registered*.e57"]
     )
+    """Globs, in the mission's run folder, of the registered cloud (LAZ in the field frame
+    or a multi-scan E57 with poses)."""
     trail_step_m: Annotated[float, msgspec.Meta(gt=0)] = 0.05
+    """The driven trail's point spacing (m)."""
     trait: str = "height"
+    """Which of :data:`common.canopy.TRAITS` the traits tab colours the plots by, once the
+    mission's ``traits_file`` exists."""
     traits_file: Annotated[str, msgspec.Meta(min_length=1)] = "traits.csv"
+    """The traits file in the mission's run folder (written after registration)."""
 
     def __post_init__(self) -> None:
         try:

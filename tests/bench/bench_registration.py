@@ -46,7 +46,8 @@ from phenorover.eval.register.score import score_registration
 from phenorover.eval.registration import NAV_SIGMA, TARGETS, error_models, record
 from phenorover.eval.results import Bench
 from services.planner.core import plan
-from services.register.pipeline import RegisterConfig, ScanInput, register
+from services.register.config import RegisterConfig
+from services.register.pipeline import ScanInput, register
 from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.world import World

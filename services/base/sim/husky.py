@@ -70,34 +70,46 @@ IMU_ACCEL_VAR = 1e-2
 
 
 class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """The simulated driver as a ROS 2 node: topics as the base service's
-    ``ros2_cmd_vel``/``ros2_odom``/``ros2_scan``/``ros2_imu``/``ros2_battery`` name
-    them, resolved against ``namespace``; ``pose_covariance``/``twist_covariance``
-    the diagonals (x, y, z, roll, pitch, yaw) the odometry carries; ``yaw_var`` the
-    IMU's yaw variance (rad^2). ``cmd_vel_type = "TwistStamped"`` with ``namespace =
-    "/a200_0000"``, ``odom = "platform/odom"``, ``scan = "sensors/lidar2d_0/scan"``,
-    ``imu = "sensors/imu_0/data"`` and ``battery = "platform/bms/state"`` plays
-    Clearpath's ROS 2 Jazzy platform, which also refuses a stamped command older than
-    ``cmd_vel_timeout_s`` by its own clock (diff_drive_controller's
-    ``cmd_vel_timeout``: its default, 0.5 s, here; Clearpath's husky_control sets
-    0.25 s, the figure docs/devices.md gives for the wheels' stop) and takes a zero
-    stamp as now."""
+    """The simulated driver as a ROS 2 node. ``cmd_vel_type = "TwistStamped"`` with
+    ``namespace = "/a200_0000"``, ``odom = "platform/odom"``, ``scan =
+    "sensors/lidar2d_0/scan"``, ``imu = "sensors/imu_0/data"`` and ``battery =
+    "platform/bms/state"`` plays Clearpath's ROS 2 Jazzy platform."""
 
     domain_id: Annotated[int, msgspec.Meta(ge=0, le=232)] = 0
+    """The ROS 2 domain."""
     namespace: Annotated[str, msgspec.Meta(pattern=NAMESPACE_PATTERN)] = "/"
+    """The namespace the topics are resolved against."""
     node_name: Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)] = "husky_node"
+    """The node's name."""
     cmd_vel: Topic = "cmd_vel"
+    """The velocity command topic (the base service's ``ros2_cmd_vel``)."""
     cmd_vel_type: CmdVelType = "Twist"
+    """The velocity command's message type."""
     odom: Topic = "odom"
+    """The odometry topic (the base service's ``ros2_odom``)."""
     scan: Topic = "scan"
+    """The 2D lidar's topic (the base service's ``ros2_scan``)."""
     imu: Topic = "imu/data"
+    """The IMU's topic (the base service's ``ros2_imu``)."""
     battery: Topic = "battery_state"
+    """The battery's topic (the base service's ``ros2_battery``)."""
     odom_frame: str = ODOM_FRAME
+    """The odometry's frame."""
     base_frame: str = BASE_FRAME
+    """The odometry's child frame."""
     pose_covariance: Cov6 = HUSKY_COVARIANCE
+    """The diagonal (x, y, z, roll, pitch, yaw) of the pose covariance the odometry
+    carries (husky_control's)."""
     twist_covariance: Cov6 = HUSKY_COVARIANCE
+    """The diagonal (x, y, z, roll, pitch, yaw) of the twist covariance the odometry
+    carries (husky_control's)."""
     yaw_var: Annotated[float, msgspec.Meta(ge=0)] = IMU_YAW_VAR
+    """The IMU's yaw variance (rad²)."""
     cmd_vel_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.5
+    """A stamped command older than this by the node's own clock is refused, and a zero
+    stamp is taken as now (diff_drive_controller's ``cmd_vel_timeout``: its default,
+    0.5 s, here; Clearpath's husky_control sets 0.25 s, the figure docs/devices.md
+    gives for the wheels' stop)."""
 
 
 def covariance(diagonal: Cov6) -> list[float]:

@@ -16,41 +16,45 @@ log = logging.getLogger(__name__)
 
 class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Faults to inject (the scanner's ``[services.scanner.sim_faults]``). Times are on
-    the emulator's clock (sim seconds in simulation).
-
-    - ``lose_first_acks``: the first N commands are executed but their ACK is lost;
-    - ``lose_first_commands``: the first N commands never reach the device;
-    - ``no_ack``: the device ignores every command (a dead command path); status
-      frames still flow;
-    - ``error_code`` > 0: the scan fails with that code when it reaches
-      ``error_at_pct``;
-    - ``stuck_at_pct``: progress freezes there and the scan never completes;
-    - ``bus_off_for_s`` > 0: the scanner's CAN node goes bus-off right after it
-      acknowledges the Initiate of a scan, for that long: it sends and hears nothing
-      (the scan itself goes on), and the client's sends fail with
-      ``can.CanOperationError``, as python-can reports a bus with no one to
-      acknowledge (see :class:`services.scanner.device.BusOffGate`; across an SLCAN
-      link, :mod:`services.scanner.sim.slcan_device` reports it as an adapter does);
-      once only.
-
-    Each ``*_scan_ids`` list aims its fault at those scan ids (empty: every scan;
-    for ``bus_off`` the first listed scan to start). A command concerns the scan it
-    names (Initiate, End) or the current one (Record/Pause). With ``lose_scan_ids``
-    the first N commands or ACKs *of each listed scan* are lost.
-    """
+    the emulator's clock (sim seconds in simulation). Each ``*_scan_ids`` list aims its
+    fault at those scan ids (empty: every scan). A command concerns the scan it names
+    (Initiate, End) or the current one (Record/Pause)."""
 
     lose_first_acks: Annotated[int, msgspec.Meta(ge=0)] = 0
+    """The first N commands are executed but their ACK is lost (with ``lose_scan_ids``:
+    the first N of each listed scan)."""
     lose_first_commands: Annotated[int, msgspec.Meta(ge=0)] = 0
+    """The first N commands never reach the device (with ``lose_scan_ids``: the first N
+    of each listed scan)."""
     no_ack: bool = False
+    """The device ignores every command (a dead command path); status frames still
+    flow."""
     error_code: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 0
+    """Above 0: the scan fails with this code when it reaches ``error_at_pct``."""
     error_at_pct: NonNegative = 50.0
+    """The progress (%) at which ``error_code`` fails the scan."""
     stuck_at_pct: NonNegative | None = None
+    """Progress freezes at this (%) and the scan never completes; none: it does not."""
     error_scan_ids: list[int] = msgspec.field(default_factory=list)
+    """The scans ``error_code`` fails."""
     stuck_scan_ids: list[int] = msgspec.field(default_factory=list)
+    """The scans that get stuck at ``stuck_at_pct``."""
     lose_scan_ids: list[int] = msgspec.field(default_factory=list)
+    """The scans whose commands or ACKs are lost (``lose_first_*``)."""
     no_ack_scan_ids: list[int] = msgspec.field(default_factory=list)
+    """The scans whose commands the device ignores (``no_ack``)."""
     bus_off_for_s: NonNegative = 0.0
+    """Above 0: right after it acknowledges the Initiate of the first aimed scan, the
+    scanner's CAN node goes bus-off for this long, once: it sends and hears nothing (the
+    scan itself goes on), and the client's sends fail with ``can.CanOperationError``,
+    as python-can reports a bus with no one to acknowledge
+    (:class:`services.scanner.device.BusOffGate`; across an SLCAN link,
+    :mod:`services.scanner.sim.slcan_device` reports it as an adapter does). A scan
+    that completes meanwhile reports DONE once the bus is back, but its Inclinometer
+    frame is lost."""
     bus_off_scan_ids: list[int] = msgspec.field(default_factory=list)
+    """The scans bus-off may come at: the first of them to start; empty: the first
+    scan."""
 
 
 def aimed(ids: list[int], scan_id: int) -> bool:
