@@ -20,7 +20,7 @@ from services.sim.lidar import LidarConfig
 from services.sim.render import FaroNoise
 from services.sim.robot import RobotConfig
 from services.sim.terrain import TerrainConfig
-from services.sim.world import SoilZone
+from services.sim.world_config import SoilZone
 
 
 def _noise(n: StateNoise) -> str:

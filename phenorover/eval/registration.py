@@ -13,7 +13,7 @@ from typing import Any
 from phenorover.eval.error_models import faro, terrain
 from phenorover.eval.register.paper import TABLE1
 from phenorover.eval.results import Bench, Goal
-from services.sim.world import WorldConfig
+from services.sim.world_config import WorldConfig
 
 TARGETS = {"time_s": 60.0, "c2c_mean_point_error_cm": 1.0}
 NAV_SIGMA = {"xy_m": 0.01, "z_m": 0.02, "yaw_deg": 0.3, "tilt_deg": 0.015}

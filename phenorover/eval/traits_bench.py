@@ -29,7 +29,7 @@ def error_models(
     """The models the traits benchmark draws under: the survey's (navigation, FARO,
     terrain: as the registration benchmark) and the trial's growth and variation."""
     from phenorover.eval.error_models import faro, terrain
-    from services.sim.world import WorldConfig
+    from services.sim.world_config import WorldConfig
 
     w = WorldConfig()
     return {

@@ -11,7 +11,7 @@ from common.messages.core import RobotName
 from services.sim.faults import Fault
 from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
-from services.sim.world import WorldConfig
+from services.sim.world_config import WorldConfig
 
 Hz = Annotated[float, msgspec.Meta(gt=0, le=1000)]
 

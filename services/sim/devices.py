@@ -21,7 +21,8 @@ from services.sim.faults import FaultSchedule, describe
 from services.sim.imu import ImuModel
 from services.sim.lidar import beam_angles
 from services.sim.robot import RobotState
-from services.sim.world import BoxObstacle, World
+from services.sim.world import World
+from services.sim.world_config import BoxObstacle
 
 
 class Devices:

@@ -18,7 +18,7 @@ from typing import Literal
 import msgspec
 
 from common.messages.core import Coordinate, Finite, NonNegative, Positive
-from services.sim.world import BoxObstacle
+from services.sim.world_config import BoxObstacle
 
 Antenna = Literal[1, 2]
 Encoders = Literal["ok", "zero", "silent"]

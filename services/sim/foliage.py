@@ -17,39 +17,18 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from typing import Annotated
 
-import msgspec
 import numpy as np
 import numpy.typing as npt
 
 from common.arrays import F64, I64, U8
+from services.sim.plant_config import FoliageConfig
 from services.sim.terrain import Terrain
 
 Mask = npt.NDArray[np.bool_]
 Rng = np.random.Generator
 
 EMPTY, LEAF, STEM = 0, 1, 2
-
-
-class FoliageConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Canopy generator (metres). The paper thinned ENGR plots to "less than 20
-    plants" per 3 m plot (so ~6 plants/m) and modelled mature cotton as filling its
-    1.9 m box; the remaining shape parameters are assumptions that give a canopy that
-    is porous near its edge and nearly opaque over ~0.5 m of depth, as mature cotton is.
-    """
-
-    voxel: Annotated[float, msgspec.Meta(gt=0.005, le=0.5)] = 0.04
-    plants_per_m: Annotated[float, msgspec.Meta(gt=0, le=100)] = 6.0
-    # plant height as a fraction of the plot height, drawn uniformly from this range
-    height_min: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.85
-    height_max: Annotated[float, msgspec.Meta(gt=0, le=1)] = 1.0
-    branches_per_plant: Annotated[int, msgspec.Meta(ge=0, le=200)] = 14
-    leaves_per_branch: Annotated[int, msgspec.Meta(ge=0, le=100)] = 8
-    leaf_radius: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.08
-    # fraction of each leaf cluster's volume that is filled: < 1 keeps clusters porous
-    leaf_fill: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.4
-    stem_radius: Annotated[float, msgspec.Meta(ge=0, le=0.2)] = 0.006
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -29,7 +29,8 @@ from services.sim.devices import Devices
 from services.sim.faults import FaultSchedule
 from services.sim.imu import ImuModel
 from services.sim.robot import RobotState
-from services.sim.world import BoxObstacle, World
+from services.sim.world import World
+from services.sim.world_config import BoxObstacle
 
 # a robot's noise seed beside the world's: robot k (from 0) draws from seed + k * this
 SEED_STRIDE = 7919

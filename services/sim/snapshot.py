@@ -36,7 +36,7 @@ from common.field import Field, FieldLayout
 from common.files import write_atomic
 from common.robot import Robot, default_robot
 from services.sim.robot import RobotState
-from services.sim.world import WorldConfig
+from services.sim.world_config import WorldConfig
 
 log = logging.getLogger(__name__)
 VERSION = 1

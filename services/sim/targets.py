@@ -30,15 +30,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Annotated
 
-import msgspec
 import numpy as np
 
 from common.arrays import F64
 from common.field import Field
 from services.sim.scene import Scene
 from services.sim.terrain import Terrain
+from services.sim.world_config import TargetConfig
 
 # placement utility of a scan seeing 0, 1, 2, >= 3 spheres: a second sphere is worth
 # most, as it makes the scan solvable by targets with the compensator's tilt (and
@@ -46,41 +45,6 @@ from services.sim.terrain import Terrain
 # lone sphere ties nothing (measured on ENGR: 7 scans with two or more against 6
 # when the first sphere was worth most)
 _WEIGHT = np.array([0.0, 30.0, 200.0, 260.0])
-
-
-class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Sphere targets (metres, degrees). ``sites``: explicit ``[x, y, pole_height]`` per
-    target in the ``field`` frame; ``None`` picks ``count`` sites (pole heights in
-    [``pole_min``, ``pole_max``], the paper's 1.4-2 m) for the scan locations
-    ``scan_sites`` (``[x, y]``; ``None``: the field's candidate scan locations) as the module
-    docstring describes."""
-
-    count: Annotated[int, msgspec.Meta(ge=0, le=50)] = 5
-    sites: list[tuple[float, float, float]] | None = None
-    scan_sites: list[tuple[float, float]] | None = None
-    # Koppa target spheres: 200 mm diameter (paper)
-    radius: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.1
-    # not stated in the paper; 20 mm is a common rod for sphere adapters
-    pole_radius: Annotated[float, msgspec.Meta(gt=0, le=0.2)] = 0.01
-    pole_min: Annotated[float, msgspec.Meta(gt=0, le=5)] = 1.4
-    pole_max: Annotated[float, msgspec.Meta(gt=0, le=5)] = 2.0
-    # horizontal clearance of a sphere from any plot
-    clearance: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.15
-    # of a site from the robot's paths: half the Husky's 0.67 m width, the sphere's
-    # radius and ~10 cm for cross-track error; beyond the lidar stop box's 0.30 m
-    lane_clearance: Annotated[float, msgspec.Meta(ge=0, le=5)] = 0.55
-    # of a site from a scan location or the tour's origin, where the robot turns in
-    # place (0.6 m half-diagonal) and creeps during fine positioning
-    stop_clearance: Annotated[float, msgspec.Meta(ge=0, le=5)] = 1.0
-    # expected points on a sphere for it to count as seen by a scan: a known-radius
-    # fit of 10 points at 0.3-0.5 mm noise is good to ~1 mm
-    min_points: Annotated[float, msgspec.Meta(gt=0)] = 10.0
-    # scan step the placement plans for (the paper's) and the largest range tried
-    step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.36
-    max_range: Annotated[float, msgspec.Meta(gt=0)] = 15.0
-    # two spheres closer than this would be confused by the matcher
-    min_separation: Annotated[float, msgspec.Meta(ge=0)] = 3.0
-    grid: Annotated[float, msgspec.Meta(gt=0.01, le=5)] = 0.2
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

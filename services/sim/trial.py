@@ -23,9 +23,7 @@ import dataclasses
 import datetime
 import math
 import zlib
-from typing import Annotated
 
-import msgspec
 import numpy as np
 import numpy.typing as npt
 
@@ -33,66 +31,11 @@ from common import fieldbook
 from common.arrays import F64
 from common.field import Field, FieldLayout
 from common.field_model import PlotRecord
-from services.sim.foliage import FoliageConfig, PlotGrowth
-
-Sd = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
-Share = Annotated[float, msgspec.Meta(ge=0.0, lt=1.0)]
-Deg = Annotated[float, msgspec.Meta(ge=0.0, le=60.0)]
+from services.sim.foliage import PlotGrowth
+from services.sim.plant_config import FoliageConfig, TrialConfig
 
 _ENTRY_TAG, _PLOT_TAG = 0x7A1A, 0x7A1B  # keep the trial's streams apart from the others'
 _NOISE, _GAPS, _LEANS, _PLANTS = range(4)
-
-
-class TrialConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """How the trial varies and when it is surveyed (manifest
-    ``[services.sim.world.trial]``; days, metres, degrees; sd are on the log scale, so
-    ~relative for these sizes, and a factor is never <= 0).
-
-    - ``date``: the survey date; None = mature plants. A date needs the layout's
-      ``planting_date`` and may not be before it.
-    - ``vary``: vary the plots even without a field book (every plot its own entry).
-    - growth: ``size(t) = 1 / (1 + exp(-rate_per_day * (t - inflection_days)))`` of the
-      mature size at t days after planting; height grows with ``size``, the canopy's
-      half-width with ``size ** width_exponent`` (young plants are broader than tall for
-      their final shape). Assumption: cotton has most of its height by 90-110 days
-      after planting (size 0.94 at 90, 0.99 at 110 with these defaults).
-    - ``height_mean``: mean mature plant height as a share of the plot box's height
-      (assumption; the box is the paper's mature-canopy envelope, never exceeded:
-      heights are clipped to it), so genotypes mostly span ~0.65-1.0 of the box.
-    - ``plant_spread``: plant-to-plant height spread in a plot, uniform +-share
-      (assumption: as the uniform 0.85-1.0 draw of an unvaried plot).
-    - ``entry_sd_*``, ``plot_sd_*``: genetic (per entry) and environmental (per plot)
-      sd of the height, width and density factors (assumption: entries differ about
-      twice as much as reps of one entry, a heritable trait in a good trial).
-    - gaps: a planted position fails to emerge with overall probability ``gap_rate``;
-      a failure is followed by another with probability ``gap_run`` (mean run
-      1 / (1 - gap_run) positions). Assumption: the paper's ENGR plots were sown with
-      40 seeds and thinned to < 20 plants, which leaves few but real holes.
-    - leans: a share ``lean_share`` of the plants leans across the row, towards either
-      lane, by ``lean_deg_min``-``lean_deg_max`` degrees from vertical (assumption: a
-      few lodged plants per plot); their canopy may leave the box sideways by at most
-      ``lean_margin`` (the stem's lean is capped so its tip stays inside that).
-    """
-
-    date: datetime.date | None = None
-    vary: bool = False
-    rate_per_day: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.08
-    inflection_days: Annotated[float, msgspec.Meta(ge=0.0, le=365.0)] = 55.0
-    width_exponent: Annotated[float, msgspec.Meta(ge=0.0, le=2.0)] = 0.5
-    height_mean: Annotated[float, msgspec.Meta(gt=0.0, le=1.0)] = 0.85
-    plant_spread: Share = 0.08
-    entry_sd_height: Sd = 0.08
-    entry_sd_width: Sd = 0.08
-    entry_sd_density: Sd = 0.15
-    plot_sd_height: Sd = 0.04
-    plot_sd_width: Sd = 0.04
-    plot_sd_density: Sd = 0.08
-    gap_rate: Share = 0.06
-    gap_run: Share = 0.5
-    lean_share: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.08
-    lean_deg_min: Deg = 15.0
-    lean_deg_max: Deg = 30.0
-    lean_margin: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.15
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

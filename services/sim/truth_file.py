@@ -27,8 +27,8 @@ import numpy.typing as npt
 
 from common.canopy import CanopyDefinition
 from common.files import write_atomic
+from services.sim.plant_config import TrialConfig
 from services.sim.robot import RobotState
-from services.sim.trial import TrialConfig
 
 PLANTS_TRUTH = "plants.truth.json"
 

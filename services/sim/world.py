@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import Annotated
 
 import msgspec
 import numpy as np
@@ -17,81 +16,19 @@ import numpy.typing as npt
 from common.arrays import F64, U8
 from common.field import Field, FieldLayout
 from common.geo import rot_zyx
-from common.messages.core import Positive
 from common.robot import Robot, default_robot
 from services.sim import lidar as lidar_mod
 from services.sim import robot as robot_mod
-from services.sim.foliage import Foliage, FoliageConfig, build_foliage
-from services.sim.render import FaroNoise, Scan, ScanSettings, render
-from services.sim.robot import RobotConfig, RobotState
+from services.sim.foliage import Foliage, build_foliage
+from services.sim.render import Scan, ScanSettings, render
+from services.sim.robot import RobotState
 from services.sim.scene import OBSTACLE, PLOT, POLE, SPHERE, Scene
 from services.sim.sky import SkyMask
-from services.sim.targets import (
-    Survey,
-    TargetConfig,
-    Targets,
-    build_targets,
-    drive_network,
-)
-from services.sim.terrain import Terrain, TerrainConfig, build_terrain
-from services.sim.trial import TrialConfig, TrialPlan, plan_trial
+from services.sim.targets import Survey, Targets, build_targets, drive_network
+from services.sim.terrain import Terrain, build_terrain
+from services.sim.trial import TrialPlan, plan_trial
 from services.sim.truth_points import truth_points
-
-
-class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
-    """An axis-aligned box standing on the ground, centred at (x, y) (m)."""
-
-    x: float
-    y: float
-    size_x: Positive
-    size_y: Positive
-    height: Positive
-
-
-class CylinderObstacle(
-    msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="cylinder"
-):
-    """A vertical cylinder standing on the ground (a person's leg, a post) (m)."""
-
-    x: float
-    y: float
-    radius: Positive
-    height: Positive
-
-
-Obstacle = BoxObstacle | CylinderObstacle
-
-
-class SoilZone(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """A rectangle of the field frame (m) where the ground has traction factor
-    ``soil`` instead of the world's (the paper's southern paths: loose rocks)."""
-
-    x_min: float
-    y_min: float
-    x_max: float
-    y_max: float
-    soil: Annotated[float, msgspec.Meta(ge=0, le=10)]
-
-
-class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Everything that shapes the world. ``seed`` seeds terrain, plants and target
-    heights (sensor noise takes the caller's generator). ``soil``: traction factor of
-    the whole field for wheel slip, 1 = firm, 2-3 = loose or rocky; ``soil_zones``:
-    rectangles with a soil of their own (the paper's southern paths). ``trial``: how
-    the plots vary and the survey date (:mod:`services.sim.trial`). Where the robot's
-    sensors sit is the robot description's, not the world's (:class:`World`)."""
-
-    seed: int = 0
-    terrain: TerrainConfig = TerrainConfig()
-    foliage: FoliageConfig = FoliageConfig()
-    targets: TargetConfig = TargetConfig()
-    obstacles: list[Obstacle] = []
-    soil: Annotated[float, msgspec.Meta(ge=0, le=10)] = 1.0
-    soil_zones: list[SoilZone] = []
-    robot: RobotConfig = RobotConfig()
-    scanner_noise: FaroNoise = FaroNoise()
-    lidar: lidar_mod.LidarConfig = lidar_mod.LidarConfig()
-    trial: TrialConfig = TrialConfig()
+from services.sim.world_config import BoxObstacle, Obstacle, WorldConfig
 
 
 def _obstacle_arrays(obstacles: list[Obstacle], terrain: Terrain) -> tuple[F64, F64]:

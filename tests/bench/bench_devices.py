@@ -37,7 +37,8 @@ from services.planner.core import plan
 from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.scene import LABEL_NAMES
-from services.sim.world import World, WorldConfig
+from services.sim.world import World
+from services.sim.world_config import WorldConfig
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

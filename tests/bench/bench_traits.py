@@ -54,11 +54,11 @@ from phenorover.eval.results import Bench
 from services.mission.log import MissionLog
 from services.planner.core import plan
 from services.register.pipeline import register
-from services.sim.foliage import FoliageConfig
+from services.sim.plant_config import FoliageConfig, TrialConfig
 from services.sim.plant_truth import plant_truth
 from services.sim.render import ScanSettings
-from services.sim.trial import TrialConfig
-from services.sim.world import World, WorldConfig
+from services.sim.world import World
+from services.sim.world_config import WorldConfig
 from services.traits.compute import RunTraits, compute_traits
 from services.traits.config import TraitsConfig
 from services.traits.run import RunInput

@@ -36,7 +36,8 @@ from services.register.runlog import Placement, nav_pose
 from services.sim.config import SimConfig
 from services.sim.robot import RobotState
 from services.sim.terrain import TerrainConfig
-from services.sim.world import World, WorldConfig
+from services.sim.world import World
+from services.sim.world_config import WorldConfig
 from services.viz import scene
 from tests.conftest import REPO
 

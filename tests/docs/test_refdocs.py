@@ -22,17 +22,6 @@ ROOTS = (
     *SERVICES.values(),
     *JOBS.values(),
 )
-# config Structs whose options are still documented by hand (class docstring or comments);
-# it may only shrink: convert one, take it out
-PENDING = {
-    "services.sim.foliage.FoliageConfig",
-    "services.sim.targets.TargetConfig",
-    "services.sim.trial.TrialConfig",
-    "services.sim.world.BoxObstacle",
-    "services.sim.world.CylinderObstacle",
-    "services.sim.world.SoilZone",
-    "services.sim.world.WorldConfig",
-}
 
 
 def _load(spec: str) -> type:
@@ -76,9 +65,6 @@ def test_generated_regions_are_the_codes() -> None:
 @pytest.mark.parametrize("cls", config_structs(), ids=_name)
 def test_every_option_has_a_meaning(cls: type) -> None:
     missing = [name for name, doc in field_docs(cls).items() if not doc]
-    if _name(cls) in PENDING:
-        assert missing, f"{_name(cls)} is documented: take it out of PENDING"
-        pytest.skip("documented by hand, still to convert")
     assert not missing, f"{_name(cls)}: no attribute docstring under {', '.join(missing)}"
 
 

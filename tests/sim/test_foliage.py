@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from services.sim.foliage import EMPTY, STEM, FoliageConfig, build_foliage
+from services.sim.foliage import EMPTY, STEM, build_foliage
+from services.sim.plant_config import FoliageConfig
 from services.sim.scene import LEAF_HIT, STEM_HIT, Scene
 from services.sim.terrain import TerrainConfig, build_terrain
 

@@ -6,7 +6,8 @@ import pytest
 from common.field import load_field
 from common.geo import se3
 from common.pointcloud import PosedScan, read_e57, write_e57
-from services.sim.foliage import FoliageConfig, build_foliage
+from services.sim.foliage import build_foliage
+from services.sim.plant_config import FoliageConfig
 from services.sim.render import (
     FaroNoise,
     ScanSettings,

@@ -18,7 +18,7 @@ from services.sim import snapshot
 from services.sim.robot import RobotState
 from services.sim.storage import PathRefused, confine
 from services.sim.truth_file import ScanTruth, write_truth
-from services.sim.world import WorldConfig
+from services.sim.world_config import WorldConfig
 
 
 def _read(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -11,14 +11,9 @@ from common.field import load_field
 from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
 from services.sim.scene import SPHERE
-from services.sim.targets import (
-    TargetConfig,
-    _segment_distance,
-    drive_network,
-    expected_points,
-    select,
-)
-from services.sim.world import World, WorldConfig
+from services.sim.targets import _segment_distance, drive_network, expected_points, select
+from services.sim.world import World
+from services.sim.world_config import TargetConfig, WorldConfig
 
 
 def planned_survey(layout, field):

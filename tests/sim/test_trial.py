@@ -16,13 +16,14 @@ import pytest
 from common.field import Field, FieldLayout, build_field, load_field
 from common.field_model import PlotRecord
 from phenorover.eval.fields import engr_sized
-from services.sim.foliage import EMPTY, Foliage, FoliageConfig, build_foliage
+from services.sim.foliage import EMPTY, Foliage, build_foliage
+from services.sim.plant_config import FoliageConfig, TrialConfig
 from services.sim.plant_truth import plant_truth, write_plant_truth
-from services.sim.targets import TargetConfig
 from services.sim.terrain import Terrain, TerrainConfig, build_terrain
-from services.sim.trial import TrialConfig, TrialPlan, entry_effects, growth, plan_trial
+from services.sim.trial import TrialPlan, entry_effects, growth, plan_trial
 from services.sim.truth_file import PLANTS_TRUTH
-from services.sim.world import World, WorldConfig
+from services.sim.world import World
+from services.sim.world_config import TargetConfig, WorldConfig
 
 # sha256 of World(*load_field(name)).foliage.occ, taken on the code before trials
 # existed: a field with no entries and no date must grow exactly the same plants

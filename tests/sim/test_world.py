@@ -5,7 +5,8 @@ import pytest
 from common.field import load_field
 from services.sim.robot import RobotState
 from services.sim.scene import GROUND, LEAF_HIT, SPHERE
-from services.sim.world import BoxObstacle, CylinderObstacle, World, WorldConfig
+from services.sim.world import World
+from services.sim.world_config import BoxObstacle, CylinderObstacle, WorldConfig
 
 
 @pytest.fixture(scope="module")
