@@ -35,7 +35,10 @@ HEADER = (
 
 def save_configs(bus: Bus, folder: Path, say: Callable[[str, str], None]) -> Path:
     """Ask every service of the robot for its configuration and :func:`record` the
-    answers in ``folder``."""
+    answers in ``folder``. Called as a mission is launched, before its worker runs:
+    there (a command's handler, or the service's start) the world in lockstep waits
+    for the mission, so the wall time the answers take changes nothing in the run,
+    where the worker, once driving, would start its first route at another sim time."""
     return record(folder, gather(bus, GATHER_S), say)
 
 

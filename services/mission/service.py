@@ -180,6 +180,7 @@ class MissionService:
         """Run the survey of ``log`` on a worker; the operator's abort and pause are
         set (or cleared) by the caller, before planning."""
         self.mission, self.log = name, log
+        save_configs(self.ctx.bus, self.ctx.run_dir / name, self.event)
         if self.lanes is not None and self.plan is not None:
             self.lanes.use(self.plan)
         if self._paused.is_set():
@@ -238,7 +239,6 @@ class MissionService:
             if not clock_started(self.ctx.clock, self._wake, self.ctx.log):
                 raise Aborted
             assert self.plan is not None
-            save_configs(self.ctx.bus, self.ctx.run_dir / str(self.mission), self.event)
             battery = BatteryWatch(self, sv, self.cfg, self.plan, self.ctx.robot.battery)
             walk(self, log, sv, self.cfg, segs, self._wake, battery)
             if self.cfg.return_to_origin:
