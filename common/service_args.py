@@ -10,8 +10,9 @@ import argparse
 import dataclasses
 import logging
 import os
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -51,6 +52,25 @@ def setup_logging(level: str) -> None:
         stream=sys.stderr,
         force=True,
     )
+
+
+def run_tool(
+    name: str,
+    doc: str | None,
+    add_arguments: Callable[[argparse.ArgumentParser], None],
+    command: Callable[[argparse.Namespace], int],
+    argv: list[str] | None = None,
+) -> int:
+    """``python -m services.NAME`` of a one-shot tool (register, traits): its flags and
+    ``--log-level``, logging set up, then ``command``'s exit status."""
+    p = argparse.ArgumentParser(prog=f"python -m services.{name}", description=doc)
+    add_arguments(p)
+    p.add_argument("--log-level", default="info")
+    args = p.parse_args(argv)
+    setup_logging(args.log_level)
+    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    return command(args)
 
 
 def parser(name: str) -> argparse.ArgumentParser:
