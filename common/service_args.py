@@ -127,6 +127,19 @@ def resolve_config(
     return decode_section(section, config_type, where), manifest
 
 
+def resolve_job(
+    name: str, config_type: type[C], args: argparse.Namespace, extra: Sequence[str] = ()
+) -> tuple[C, Manifest | None]:
+    """A job's options and manifest from the flags of :func:`add_job_arguments`;
+    ``extra``: the ``key=value`` overrides of the job's own flags, applied after
+    ``--set``. Raises ConfigError, one line naming the file and the key."""
+    overrides = [*args.set, *extra]
+    if args.figures is not None:
+        overrides.append(f"figures={str(args.figures).lower()}")
+    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
+    return resolve_config(name, config_type, ns)
+
+
 @dataclasses.dataclass(frozen=True)
 class Launch(Generic[C]):
     """What a service starts from: its name and config, the manifest it came from
