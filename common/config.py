@@ -223,18 +223,19 @@ def apply_overrides(section: dict[str, Any], overrides: list[str]) -> dict[str, 
     return out
 
 
-def _drop_none(x: Any) -> Any:
+def drop_none(x: Any) -> Any:
+    """TOML has no null: an unset option is left out, as it would be written by hand."""
     if isinstance(x, dict):
-        return {k: _drop_none(v) for k, v in x.items() if v is not None}
+        return {k: drop_none(v) for k, v in x.items() if v is not None}
     if isinstance(x, list):
-        return [_drop_none(v) for v in x]
+        return [drop_none(v) for v in x]
     return x
 
 
 def dump_toml(cfg: msgspec.Struct) -> str:
     """The config as TOML; optional keys left unset (None) are omitted, as TOML has no
     null and an absent key decodes back to None."""
-    return msgspec.toml.encode(_drop_none(msgspec.to_builtins(cfg))).decode()
+    return msgspec.toml.encode(drop_none(msgspec.to_builtins(cfg))).decode()
 
 
 def zenoh_config(

@@ -45,7 +45,33 @@ Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_.-]{1,64}$")]
 MIN_BASELINE_M = 0.1
 
 
-class GnssAntenna(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+class _At:
+    """``xyz`` of a part with ``x``, ``y``, ``z`` fields; each part declares the fields
+    itself, with its own bounds and attribute docstrings (the generated docs read them)."""
+
+    __slots__ = ()
+    x: float
+    y: float
+    z: float
+
+    @property
+    def xyz(self) -> tuple[float, float, float]:
+        return (self.x, self.y, self.z)
+
+
+class _Yawed:
+    """``yaw_rad`` of a part with a ``yaw_deg`` field (declared by the part, as for
+    :class:`_At`)."""
+
+    __slots__ = ()
+    yaw_deg: float
+
+    @property
+    def yaw_rad(self) -> float:
+        return math.radians(self.yaw_deg)
+
+
+class GnssAntenna(_At, msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A GNSS antenna's phase centre (:attr:`Robot.antennas`)."""
 
     name: Name
@@ -57,12 +83,10 @@ class GnssAntenna(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     z: Coord
     """The phase centre's z in base_link (m)."""
 
-    @property
-    def xyz(self) -> tuple[float, float, float]:
-        return (self.x, self.y, self.z)
 
-
-class ScannerMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+class ScannerMount(
+    _At, _Yawed, msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True
+):
     """The TLS's mount (:attr:`Robot.scanner`)."""
 
     x: Coord
@@ -75,16 +99,10 @@ class ScannerMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     yaw_deg: Angle = 0.0
     """The scanner's zero azimuth from base_link x (deg)."""
 
-    @property
-    def xyz(self) -> tuple[float, float, float]:
-        return (self.x, self.y, self.z)
 
-    @property
-    def yaw_rad(self) -> float:
-        return math.radians(self.yaw_deg)
-
-
-class LidarMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+class LidarMount(
+    _At, _Yawed, msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True
+):
     """The 2D lidar's mount (:attr:`Robot.lidar`)."""
 
     x: Coord
@@ -96,16 +114,8 @@ class LidarMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     yaw_deg: Angle = 0.0
     """The direction of its 0-degree beam from base_link x (deg)."""
 
-    @property
-    def xyz(self) -> tuple[float, float, float]:
-        return (self.x, self.y, self.z)
 
-    @property
-    def yaw_rad(self) -> float:
-        return math.radians(self.yaw_deg)
-
-
-class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+class ImuMount(_Yawed, msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The IMU's mount (:attr:`Robot.imu`)."""
 
     x: Coord = 0.0
@@ -128,10 +138,6 @@ class ImuMount(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     @property
     def pitch_rad(self) -> float:
         return math.radians(self.pitch_deg)
-
-    @property
-    def yaw_rad(self) -> float:
-        return math.radians(self.yaw_deg)
 
 
 class Footprint(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):

@@ -10,8 +10,9 @@ import argparse
 import dataclasses
 import logging
 import os
+import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
@@ -51,6 +52,25 @@ def setup_logging(level: str) -> None:
         stream=sys.stderr,
         force=True,
     )
+
+
+def run_tool(
+    name: str,
+    doc: str | None,
+    add_arguments: Callable[[argparse.ArgumentParser], None],
+    command: Callable[[argparse.Namespace], int],
+    argv: list[str] | None = None,
+) -> int:
+    """``python -m services.NAME`` of a one-shot tool (register, traits): its flags and
+    ``--log-level``, logging set up, then ``command``'s exit status."""
+    p = argparse.ArgumentParser(prog=f"python -m services.{name}", description=doc)
+    add_arguments(p)
+    p.add_argument("--log-level", default="info")
+    args = p.parse_args(argv)
+    setup_logging(args.log_level)
+    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
+    return command(args)
 
 
 def parser(name: str) -> argparse.ArgumentParser:
@@ -105,6 +125,19 @@ def resolve_config(
         where = str(args.config)
     section = apply_overrides(section, args.set)
     return decode_section(section, config_type, where), manifest
+
+
+def resolve_job(
+    name: str, config_type: type[C], args: argparse.Namespace, extra: Sequence[str] = ()
+) -> tuple[C, Manifest | None]:
+    """A job's options and manifest from the flags of :func:`add_job_arguments`;
+    ``extra``: the ``key=value`` overrides of the job's own flags, applied after
+    ``--set``. Raises ConfigError, one line naming the file and the key."""
+    overrides = [*args.set, *extra]
+    if args.figures is not None:
+        overrides.append(f"figures={str(args.figures).lower()}")
+    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
+    return resolve_config(name, config_type, ns)
 
 
 @dataclasses.dataclass(frozen=True)

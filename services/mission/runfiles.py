@@ -6,26 +6,16 @@ Each is written under a temporary name and renamed, so none is ever half written
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import msgspec
 import tomli_w
 
-from common.config import load_manifest
+from common.config import drop_none, load_manifest
 from common.files import write_atomic
 from common.messages.plan import PlanResult
 from common.robot import RUN_COPY, Robot, dump_robot, robot_path
 
 MANIFEST_COPY = "manifest.toml"
-
-
-def _no_none(v: Any) -> Any:
-    """TOML has no null: an unset option is left out, as it would be written by hand."""
-    if isinstance(v, dict):
-        return {k: _no_none(x) for k, x in v.items() if x is not None}
-    if isinstance(v, list):
-        return [_no_none(x) for x in v]
-    return v
 
 
 def effective_manifest(manifest: Path, field: str) -> bytes:
@@ -35,7 +25,7 @@ def effective_manifest(manifest: Path, field: str) -> bytes:
     m = msgspec.to_builtins(load_manifest(manifest))
     m["field"], m["robot"] = field, str(robot_path(m.get("robot", "")))
     head = f"# the manifest this mission ran with: {manifest}, field and robot resolved\n"
-    return head.encode() + tomli_w.dumps(_no_none(m)).encode()
+    return head.encode() + tomli_w.dumps(drop_none(m)).encode()
 
 
 def write_run_files(

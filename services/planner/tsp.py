@@ -57,12 +57,16 @@ def _check(d: F64) -> F64:
     return d
 
 
-def _trivial(d: F64, method: str, t0: float) -> Tour | None:
+def _start(d: F64, method: str) -> tuple[float, F64, Tour | None]:
+    """A solver's start: its clock, the checked matrix and, for at most three nodes
+    (every order is then optimal), the tour itself."""
+    t0 = time.perf_counter()
+    d = _check(d)
     n = d.shape[0]
     if n > 3:
-        return None
+        return t0, d, None
     order = list(range(n))
-    return Tour(order, tour_length(d, order), method, "optimal", time.perf_counter() - t0)
+    return t0, d, Tour(order, tour_length(d, order), method, "optimal", time.perf_counter() - t0)
 
 
 def nearest_neighbour(d: F64) -> Tour:
@@ -88,12 +92,10 @@ def circuit_cpsat(
 ) -> Tour:
     """CP-SAT over arc literals with ``add_circuit``; ``status`` is ``"optimal"`` only
     when CP-SAT proves it. Raises RuntimeError when no tour is found in time."""
-    t0 = time.perf_counter()
-    d = _check(d)
-    n = d.shape[0]
-    trivial = _trivial(d, "cp-sat-circuit", t0)
+    t0, d, trivial = _start(d, "cp-sat-circuit")
     if trivial is not None:
         return trivial
+    n = d.shape[0]
     cost = np.rint(d * _SCALE).astype(np.int64)
     m = cp_model.CpModel()
     arcs: dict[tuple[int, int], cp_model.IntVar] = {}
@@ -137,12 +139,10 @@ def gls_parameters(time_limit_s: float) -> Any:
 
 def guided_local_search(d: F64, time_limit_s: float = 10.0) -> Tour:
     """OR-Tools routing: PATH_CHEAPEST_ARC then GUIDED_LOCAL_SEARCH until the limit."""
-    t0 = time.perf_counter()
-    d = _check(d)
-    n = d.shape[0]
-    trivial = _trivial(d, "guided-local-search", t0)
+    t0, d, trivial = _start(d, "guided-local-search")
     if trivial is not None:
         return trivial
+    n = d.shape[0]
     cost = np.rint(d * _SCALE).astype(np.int64).tolist()
     manager = pywrapcp.RoutingIndexManager(n, 1, 0)
     routing = pywrapcp.RoutingModel(manager)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import signal
 import sys
 import time
 from pathlib import Path
@@ -184,13 +183,6 @@ def add_command(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from common.service_args import setup_logging
+    from common.service_args import run_tool
 
-    p = argparse.ArgumentParser(prog="python -m services.register", description=__doc__)
-    add_arguments(p)
-    p.add_argument("--log-level", default="info")
-    args = p.parse_args(argv)
-    setup_logging(args.log_level)
-    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    return cmd_register(args)
+    return run_tool("register", __doc__, add_arguments, cmd_register, argv)

@@ -141,12 +141,7 @@ def resolve(args: argparse.Namespace) -> tuple[RegisterRunConfig, Manifest | Non
     """The effective options and the manifest (None without ``--manifest``) from the
     flags of :func:`add_config_arguments`. Raises ConfigError, one line naming the
     file and the key."""
-    from common.service_args import resolve_config
+    from common.service_args import resolve_job
 
-    overrides = list(args.set)
-    if args.laz_voxel is not None:
-        overrides.append(f"laz_voxel={args.laz_voxel!r}")
-    if args.figures is not None:
-        overrides.append(f"figures={str(args.figures).lower()}")
-    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
-    return resolve_config(NAME, RegisterRunConfig, ns)
+    extra = [] if args.laz_voxel is None else [f"laz_voxel={args.laz_voxel!r}"]
+    return resolve_job(NAME, RegisterRunConfig, args, extra)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import signal
 import sys
 import time
 from pathlib import Path
@@ -151,13 +150,6 @@ def add_command(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from common.service_args import setup_logging
+    from common.service_args import run_tool
 
-    p = argparse.ArgumentParser(prog="python -m services.traits", description=__doc__)
-    add_arguments(p)
-    p.add_argument("--log-level", default="info")
-    args = p.parse_args(argv)
-    setup_logging(args.log_level)
-    # SIGTERM (the mission service stopping) unwinds normally, so no partial file stays
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-    return cmd_traits(args)
+    return run_tool("traits", __doc__, add_arguments, cmd_traits, argv)

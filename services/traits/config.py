@@ -98,10 +98,6 @@ def resolve(args: argparse.Namespace) -> tuple[TraitsConfig, Manifest | None]:
     """The effective options and the manifest (None without ``--manifest``) from the
     flags of :func:`add_config_arguments`. Raises ConfigError, one line naming the
     file and the key."""
-    from common.service_args import resolve_config
+    from common.service_args import resolve_job
 
-    overrides = list(args.set)
-    if args.figures is not None:
-        overrides.append(f"figures={str(args.figures).lower()}")
-    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
-    return resolve_config(NAME, TraitsConfig, ns)
+    return resolve_job(NAME, TraitsConfig, args)

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.messages.nav import PoseEstimate
-from common.pointcloud import CloudIOError, read_e57
+from common.pointcloud import CloudIOError, PosedScan, read_e57
 from common.poses import F64, apply, scanner_pose
 from common.robot import ScannerMount
 
@@ -38,6 +38,17 @@ def _finite(points: npt.NDArray[np.float64]) -> F64:
     return out
 
 
+def _scans(path: str | Path) -> list[PosedScan]:
+    """The scans of E57 ``path``, at least one; raises CloudError."""
+    try:
+        scans = read_e57(path)
+    except CloudIOError as exc:
+        raise CloudError(str(exc)) from None
+    if not scans:
+        raise CloudError(f"{path}: no scan in the file")
+    return scans
+
+
 def scan_in_field(
     path: str | Path,
     pose: PoseEstimate,
@@ -49,12 +60,7 @@ def scan_in_field(
     """The first scan of E57 ``path`` (points in the scanner frame), subsampled to
     ``n`` points and placed in the field frame with the navigation pose and the
     inclinometer's pitch and roll (paper eq. 1, the scanner at ``mount`` on the robot)."""
-    try:
-        scans = read_e57(path)
-    except CloudIOError as exc:
-        raise CloudError(str(exc)) from None
-    if not scans:
-        raise CloudError(f"{path}: no scan in the file")
+    scans = _scans(path)
     vals = (pose.x, pose.y, pose.z, pose.yaw, pitch, roll)
     if not all(math.isfinite(v) for v in vals):
         raise CloudError(f"{path}: the pose to place it at is not finite: {vals}")
@@ -75,12 +81,7 @@ def registered(path: str | Path, n: int) -> F64:
             raise CloudError(f"{p}: cannot read LAS/LAZ: {exc}") from None
         pts = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
         return subsample(_finite(pts.astype(np.float64)), n)
-    try:
-        scans = read_e57(p)
-    except CloudIOError as exc:
-        raise CloudError(str(exc)) from None
-    if not scans:
-        raise CloudError(f"{p}: no scan in the file")
+    scans = _scans(p)
     per = max(n // len(scans), 1)
     return np.vstack([apply(s.pose, subsample(_finite(s.points), per)) for s in scans])
 

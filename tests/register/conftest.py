@@ -23,7 +23,7 @@ from services.planner.core import plan
 from services.register.runlog import Placement
 from services.sim.render import ScanSettings
 from services.sim.robot import RobotState
-from services.sim.truth_file import ScanTruth, write_truth
+from services.sim.truth_file import scan_truth, write_truth
 from services.sim.world import World
 
 TINY = Path(__file__).resolve().parents[1] / "data" / "tiny.toml"
@@ -62,19 +62,7 @@ def mission_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
         scan = world.render_scan(true, ScanSettings(step_deg=0.6), rng)
         path = card / f"Scan_{k + 1:05d}.e57"
         write_e57(path, [PosedScan.as_scanned(scan.points, scan.intensity, path.stem)])
-        write_truth(
-            path,
-            ScanTruth(
-                stamp_ns=k,
-                scanner_pose=true.tolist(),
-                x=state.x,
-                y=state.y,
-                z=state.z,
-                roll=state.roll,
-                pitch=state.pitch,
-                yaw=state.yaw,
-            ),
-        )
+        write_truth(path, scan_truth(k, true, state))
         ex, ey = _planar_ekf_xy(state)
         log.update(
             k,
