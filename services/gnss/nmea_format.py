@@ -1,8 +1,12 @@
 """NMEA 0183 formatting, the inverse of :func:`services.gnss.nmea.parse_sentence`.
 
 The simulated receiver formats its fixes with these so that the sim path runs
-through the same parser as a real receiver. Sentences carry their checksum and end
-in CR/LF; ``None`` fields become empty fields.
+through the same parser as a real receiver. Sentences carry their checksum
+(pynmeagps') and end in CR/LF; ``None`` fields become empty fields. The fields are
+written here rather than by pynmeagps' ``NMEAMessage.serialize``, which writes a
+position to 7 decimals of a minute at most (0.19 mm; these write 8), a hemisphere
+letter beside an empty position, and RMC only in its NMEA 4.10 form, where an Emlid
+Reach sends the 2.3 one.
 """
 
 from __future__ import annotations
