@@ -66,6 +66,7 @@ class TruthView:
         self.rec: rr.RecordingStream | None = None
         self.dashboard: int | None = None  # the pid of the dashboard we log into
         self._lock = threading.Lock()
+        self._news = threading.Condition(self._lock)  # a truth or a token arrived
         self._new: dict[str, TruthPose] = {}
         self._alive: int | None = None
         bus.subscribe(keys.SIM_TRUTH, functools.partial(self._put, "robot/truth"))
@@ -79,6 +80,7 @@ class TruthView:
     def _put(self, path: str, msg: TruthPose) -> None:
         with self._lock:
             self._new[path] = msg
+            self._news.notify_all()
 
     def _on_alive(self, key: str, alive: bool) -> None:
         token = parse_token(key)
@@ -89,8 +91,17 @@ class TruthView:
                 self._alive = token.pid
             elif self._alive == token.pid:
                 self._alive = None
+            self._news.notify_all()
 
     # --- the logging loop ---
+    def wait_news(self, timeout: float) -> bool:
+        """Until a truth has arrived since the last :meth:`tick` or the dashboard to
+        follow has changed (True), or ``timeout`` seconds (False)."""
+        with self._news:
+            return self._news.wait_for(
+                lambda: bool(self._new) or self._alive != self.dashboard, timeout
+            )
+
     def tick(self) -> None:
         """Follow the dashboard, then log the newest truth of each robot."""
         with self._lock:

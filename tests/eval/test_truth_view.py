@@ -28,15 +28,6 @@ from tests.conftest import Procs, free_port
 from tests.viz import rrd
 
 
-def wait_until(pred: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.05)  # a poll period: the condition is re-read
-    return False
-
-
 def recordings(path: Path) -> set[str]:
     """The recording ids (not blueprints) an .rrd holds, from ``rerun rrd stats``."""
     r = subprocess.run(
@@ -68,19 +59,20 @@ def test_the_truth_lands_in_the_recording_the_dashboard_serves(
     try:
         truth = client_bus.publisher(keys.SIM_TRUTH)
         poses = client_bus.publisher(keys.NAV_POSE)
-        sent = 0
-
-        def step() -> bool:
-            nonlocal sent
-            now = time.time_ns()
-            truth.put(TruthPose(stamp_ns=now, x=0.1 * sent, y=2.0, z=0.0, yaw=0.1))
-            poses.put(PoseEstimate(stamp_ns=now, x=0.1 * sent + 0.05, y=2.0, yaw=0.1))
-            view.tick()
-            sent += view.rec is not None
-            return sent >= 10  # the dashboard draws at 10 Hz: a second of both
-
-        assert wait_until(step, 20), "the overlay never followed the dashboard"
-        assert view.dashboard == viz.pid
+        health = client_bus.latest(keys.HEALTH.at(service="viz"))
+        assert view.wait_news(20), "the overlay never saw the dashboard's token"
+        view.tick()
+        assert view.rec is not None and view.dashboard == viz.pid
+        assert poses.wait_matched(10), "the dashboard never subscribed to the estimate"
+        now = time.time_ns()
+        truth.put(TruthPose(stamp_ns=now, x=0.1, y=2.0, z=0.0, yaw=0.1))
+        poses.put(PoseEstimate(stamp_ns=now, x=0.15, y=2.0, yaw=0.1))
+        assert view.wait_news(10), "the truth never reached the overlay"
+        view.tick()
+        # the dashboard draws at 10 Hz: its heartbeat from 0.3 s after the estimate was
+        # sent says it has gone through three draws since
+        beat = health.wait_for(lambda h: h.stamp_ns > now + 300_000_000, timeout=20)
+        assert beat is not None, "the dashboard's heartbeat stopped"
     finally:
         view.close()
         viz.terminate()
