@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from common.arrays import F64, I64
 from common.field import Field, FieldLayout
-from common.files import atomic_write
+from common.files import write_atomic
 from common.messages.core import Finite
 
 HEIGHT_PERCENTILE = 99.0
@@ -219,7 +219,7 @@ def _occupied_columns(xy: F64, plot: I64, boxes: F64, grid: I64) -> list[npt.NDA
 def write(path: str | Path, model: CropModel) -> None:
     """Write ``model`` as JSON to ``path`` atomically (a reader never sees half a file)."""
     data = msgspec.json.encode(model)
-    atomic_write(Path(path), lambda p: p.write_bytes(data))
+    write_atomic(Path(path), data)
 
 
 def read(path: str | Path, field: Field | None = None) -> CropModel:

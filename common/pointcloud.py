@@ -184,7 +184,8 @@ def write_merged_laz(
     path: str | Path, merged: Merged, to_utm: UtmFn | None = None, epsg: int | None = None
 ) -> int:
     """:func:`write_laz` of a cloud already merged by :func:`voxel_merge` (to write it
-    in more than one frame without merging it again)."""
+    in more than one frame without merging it again), whole or not at all
+    (:func:`common.files.atomic_path`)."""
     import laspy
 
     pts, inten, src = merged
@@ -204,5 +205,6 @@ def write_merged_laz(
     las.x, las.y, las.z = pts[:, 0], pts[:, 1], pts[:, 2]
     las.intensity = np.clip(inten * 65535.0, 0, 65535).astype(np.uint16)
     las.point_source_id = src.astype(np.uint16)
-    las.write(str(path))
+    with atomic_path(Path(path)) as tmp:
+        las.write(str(tmp))
     return len(pts)

@@ -26,6 +26,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from common.files import atomic_path
+
 DEFAULT_DIR = Path("deploy/certs")
 CA_NAME = "phenorover-ca"
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1")
@@ -188,17 +190,19 @@ def common_name(cert: x509.Certificate) -> str:
 
 
 def _write(path: Path, data: bytes, mode: int, force: bool) -> None:
-    if force:
-        path.unlink(missing_ok=True)
+    """``data`` to ``path`` with ``mode``, whole or not at all: a replaced key
+    (``force``) stays the old one until the new one is complete."""
+    if path.exists() and not force:
+        raise CertError(f"{path} exists (use --force to replace it)")
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
-    except FileExistsError:
-        raise CertError(f"{path} exists (use --force to replace it)") from None
+        with atomic_path(path) as tmp:
+            # created with its mode: a key is never readable by others, not for a moment
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+            os.chmod(tmp, mode)  # the umask may have narrowed it; keys stay 0600 either way
     except OSError as exc:
         raise CertError(f"{path}: cannot write: {exc.strerror}") from None
-    with os.fdopen(fd, "wb") as f:
-        f.write(data)
-    os.chmod(path, mode)  # the umask may have narrowed it; keys stay 0600 either way
 
 
 def _refuse_existing(paths: list[Path], force: bool) -> None:

@@ -14,7 +14,7 @@ import json
 import os
 from pathlib import Path
 
-from common.files import atomic_write
+from common.files import write_atomic
 
 _TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -84,7 +84,7 @@ class CpuUse:
         """``path`` as JSON: sim_s, wall_s, cpu_s and cpu_per_sim_s per service."""
         body = dataclasses.asdict(self) | {"cpu_per_sim_s": self.per_sim_s()}
         text = json.dumps(body, indent=1, sort_keys=True) + "\n"
-        atomic_write(path, lambda tmp: tmp.write_text(text))
+        write_atomic(path, text.encode())
 
 
 def read_use(path: Path) -> CpuUse | None:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import msgspec
 
+from common.files import write_atomic
 from phenorover.refdocs_tables import schema_table, struct_table
 
 REPO = Path(__file__).resolve().parents[1]
@@ -54,8 +55,9 @@ class Region:
     end: int
 
 
-def regions(doc: Path) -> Iterator[Region]:
-    for m in _REGION.finditer(doc.read_text()):
+def regions(doc: Path, text: str) -> Iterator[Region]:
+    """The generated regions of ``doc``, whose content is ``text``."""
+    for m in _REGION.finditer(text):
         body = m.group("body")
         yield Region(doc, m.group("source"), m.group("arg") or "", body, *m.span("body"))
 
@@ -99,7 +101,7 @@ def refresh(doc: Path) -> tuple[str, list[str]]:
     """The doc with its regions generated, and one line per region that changed."""
     text = doc.read_text()
     out, changed, pos = [], [], 0
-    for r in regions(doc):
+    for r in regions(doc, text):
         new = generate(r)
         out += [text[pos : r.start], new]
         pos = r.end
@@ -118,7 +120,7 @@ def run(root: Path = REPO, check: bool = False) -> list[str]:
         text, changed = refresh(doc)
         report += changed
         if changed and not check:
-            doc.write_text(text)
+            write_atomic(doc, text.encode())
     return report
 
 

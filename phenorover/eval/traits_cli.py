@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from common.canopy import TRAITS, column
-from common.files import atomic_write, finite
+from common.files import finite, write_atomic
 from services.sim.truth_file import PLANTS_TRUTH
 
 SCORED = ("height", "height_max", "cover", "volume_voxel", "volume_hull")
@@ -131,5 +131,5 @@ def run(args: argparse.Namespace) -> int:
             f"mean abs. error {e['mape']:.1f} % of the truth ({e['n']} plots)"
         )
     text = json.dumps(finite(res), indent=1, allow_nan=False)
-    atomic_write(args.run_dir / "eval_traits.json", lambda p: p.write_text(text))
+    write_atomic(args.run_dir / "eval_traits.json", text.encode())
     return 0

@@ -34,7 +34,7 @@ import msgspec
 
 from common.cluster import Cluster, ClusterError, add_cluster_arguments, cluster_of
 from common.config import dump_toml
-from common.files import atomic_write, finite
+from common.files import finite, write_atomic
 from common.robot import RUN_COPY, load_robot
 from services.register.config import RegisterRunConfig, add_config_arguments, resolve
 from services.register.outcome import Registration
@@ -78,9 +78,8 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
     write_e57(out / "registered.e57", reg.scans)
     outputs["e57"] = "registered.e57"
     log.info("wrote %s (%.1f s)", out / "registered.e57", time.perf_counter() - t)
-    counts: dict[str, int] = {}
     merged = voxel_merge(reg.scans, cfg.laz_voxel)  # once for both frames
-    atomic_write(out / "registered.laz", lambda p: counts.update(field=write_merged_laz(p, merged)))
+    n_points = write_merged_laz(out / "registered.laz", merged)
     outputs["laz_field"] = "registered.laz"
     layout = None if run.plan is None else run.plan.layout
     if layout is not None and layout.georeferenced:
@@ -88,14 +87,11 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
 
         frame = field_frame(layout)
         epsg = frame.utm.to_epsg()
-        atomic_write(
-            out / "utm.laz",
-            lambda p: counts.update(utm=write_merged_laz(p, merged, frame.field_to_utm, epsg)),
-        )
+        write_merged_laz(out / "utm.laz", merged, frame.field_to_utm, epsg)
         outputs["laz_utm"] = "utm.laz"
         outputs["utm_epsg"] = epsg
-    outputs["laz_points"] = counts.get("field")
-    log.info("wrote merged LAZ (%d points at %.0f mm)", counts["field"], cfg.laz_voxel * 1000)
+    outputs["laz_points"] = n_points
+    log.info("wrote merged LAZ (%d points at %.0f mm)", n_points, cfg.laz_voxel * 1000)
     figs: list[str] = []
     if cfg.figures:
         for make in (
@@ -107,7 +103,7 @@ def write_outputs(run: RunData, reg: Registration, cfg: RegisterRunConfig, out: 
             if name:
                 figs.append(name)
         log.info("wrote figures: %s", ", ".join(figs))
-    atomic_write(out / "register.toml", lambda p: p.write_text(dump_toml(cfg)))
+    write_atomic(out / "register.toml", dump_toml(cfg).encode())
     outputs["config"] = "register.toml"
     write_report(run, reg, out, outputs, figs)
 
@@ -118,8 +114,8 @@ def write_report(
     """``report.json`` and ``report.md`` from the mission log and the registration."""
     rep = build_report(run, None if reg is None else reg.report, outputs)
     text = json.dumps(finite(rep), indent=1, allow_nan=False)
-    atomic_write(out / "report.json", lambda p: p.write_text(text))
-    atomic_write(out / "report.md", lambda p: p.write_text(markdown(rep, figs)))
+    write_atomic(out / "report.json", text.encode())
+    write_atomic(out / "report.md", markdown(rep, figs).encode())
     return rep
 
 

@@ -25,6 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Rectangle
 
+from common.files import atomic_write
 from common.geo import wrap_angle
 from common.poses import F64, apply
 from services.register.metrics import subsample
@@ -163,6 +164,6 @@ def registration_hist(reg: Registration, out: Path, samples: int = 5000) -> str 
 
 def _save(fig: plt.Figure, path: Path) -> str:
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=DPI))  # report.md links it
     plt.close(fig)
     return path.name
