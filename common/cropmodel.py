@@ -29,12 +29,13 @@ import numpy.typing as npt
 from common.arrays import F64, I64
 from common.field import Field, FieldLayout
 from common.files import write_atomic
-from common.messages.core import Finite
+from common.messages.core import Coordinate
 
 HEIGHT_PERCENTILE = 99.0
 MAX_FILE_BYTES = 64 << 20
 Length = Annotated[float, msgspec.Meta(ge=0.0, le=1e4)]
-Box = tuple[Finite, Finite, Finite, Finite, Length]
+# a box in the field frame (m): x0, y0, x1, y1, height
+Box = tuple[Coordinate, Coordinate, Coordinate, Coordinate, Length]
 
 
 class CropModelError(ValueError):

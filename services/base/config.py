@@ -2,7 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from common.messages.core import BASE_FRAME, Positive
+from common.messages.core import BASE_FRAME, NonNegative, Positive
 from services.base.ros2.types import CmdVelType
 from services.base.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, TOPIC_PATTERN
 
@@ -27,9 +27,9 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     back."""
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0
     """Odometry and command rate."""
-    var_v: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
+    var_v: NonNegative = 1e-4
     """The odometry's stated speed variance, (m/s)²."""
-    var_w: Annotated[float, msgspec.Meta(ge=0)] = 1e-4
+    var_w: NonNegative = 1e-4
     """The odometry's stated turn-rate variance from the encoders' noise, (rad/s)²; the
     skid-steer's scrub comes on top (``turn_slip_sd``)."""
     turn_slip_sd: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.1

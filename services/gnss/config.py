@@ -2,6 +2,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.messages.core import Positive
 from services.gnss.compass import CompassConfig
 from services.gnss.rtk_model import RtkModelConfig
 
@@ -41,7 +42,7 @@ class GnssConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     """The ``sim`` backend's RTK error model (docs/simulation.md)."""
     seed: int = 1
     """The ``sim`` backend's noise seed."""
-    fallback_sigma_m: dict[str, float] = msgspec.field(
+    fallback_sigma_m: dict[str, Positive] = msgspec.field(
         default_factory=lambda: {"FIX": 0.014, "FLOAT": 0.25, "DGPS": 0.5, "SINGLE": 1.2}
     )
     """The 1-sigma horizontal error assumed per fix type when a receiver sends no GST

@@ -6,7 +6,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError
-from common.messages.core import Positive
+from common.messages.core import NonNegative, Positive
 from common.robot import Robot
 from services.nav.ekf import EkfConfig
 from services.nav.follower_config import FollowerConfig
@@ -45,7 +45,7 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """Returns in the box, in ``obstacle_scans`` consecutive scans, stop the robot."""
     obstacle_scans: Annotated[int, msgspec.Meta(ge=1)] = 2
     """Consecutive scans with ``obstacle_min_points`` returns in the box that stop it."""
-    obstacle_crop_margin_m: Annotated[float, msgspec.Meta(ge=0)] = 0.15
+    obstacle_crop_margin_m: NonNegative = 0.15
     """Returns this close to a plot of the field are the crop, not an obstacle, while a
     route is followed: under the canopy the estimate may be 10 cm off, which places a
     plot's edge 0.40 m from the lane's centre at 0.30 m, inside the box, and a plot never

@@ -19,7 +19,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import Manifest
-from common.messages.core import Positive
+from common.messages.core import NonNegative, Positive
 from services.register.spheres import SphereConfig
 from services.register.targets import TargetConfig
 
@@ -68,7 +68,7 @@ class RefineConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     point_sigma: Positive = 0.01
     """The floor of the point-to-plane residual sigma that scales the pair information
     (m); the pair's own RMSE when larger."""
-    independent_voxel: Annotated[float, msgspec.Meta(ge=0)] = 0.5
+    independent_voxel: NonNegative = 0.5
     """The pair information counts one point per cube of this size (m; 0: every point),
     the field's cell size: residuals on plants are correlated over a plant, not
     independent per point, so a pair of 20 000 points is not trusted to a fraction of

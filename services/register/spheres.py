@@ -29,7 +29,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from common.arrays import F64
-from common.messages.core import Positive
+from common.messages.core import NonNegative, Positive
 
 
 class SphereConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -38,7 +38,7 @@ class SphereConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
     radius: Positive = 0.1
     """The spheres' radius (m)."""
-    min_intensity: Annotated[float, msgspec.Meta(ge=0)] = 0.6
+    min_intensity: NonNegative = 0.6
     """Points at least this bright (intensity 0-1) seed candidates."""
     min_points: Annotated[int, msgspec.Meta(ge=4)] = 6
     """The fewest points a sphere is found from."""

@@ -7,7 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError, load_manifest
-from common.messages.core import RobotName
+from common.messages.core import Finite, NonNegative, Positive, RobotName
 from services.sim.faults import Fault
 from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
@@ -21,7 +21,7 @@ class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
 
     namespace: RobotName
     """Its manifest's namespace: its devices are on that namespace's keys."""
-    start: tuple[float, float, float] | None = None
+    start: tuple[Finite, Finite, Finite] | None = None
     """Its start pose ``[x, y, yaw_deg]`` (m, deg); none: its home beside the field by the
     Origin's corner, facing the field, where a split plan has it park."""
 
@@ -43,7 +43,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """The lidar's output rate."""
     seed: int = 0
     """Noise seed (the world's shape has its own, ``world.seed``)."""
-    start: tuple[float, float, float] | None = None
+    start: tuple[Finite, Finite, Finite] | None = None
     """The robot's start pose ``[x, y, yaw_deg]`` in the field frame (m, deg); none: the
     field's origin corner, facing along +x."""
     world: WorldConfig = msgspec.field(default_factory=WorldConfig)
@@ -51,12 +51,12 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     the FARO's noise, the lidar, the trial (docs/simulation.md)."""
     scan: ScanSettings = msgspec.field(default_factory=ScanSettings)
     """The rendered scan window and step (the paper's window)."""
-    inclinometer_sd_deg: Annotated[float, msgspec.Meta(ge=0)] = 0.015
+    inclinometer_sd_deg: NonNegative = 0.015
     """The scanner's dual-axis compensator noise (FARO Focus S spec: compensator
     accuracy 0.015 deg)."""
     imu: ImuConfig = msgspec.field(default_factory=ImuConfig)
     """The Husky's UM7-class IMU (:mod:`services.sim.imu`, docs/simulation.md)."""
-    motor_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.25
+    motor_timeout_s: Positive = 0.25
     """The simulated base stops the wheels when no velocity command came for this long
     (sim time)."""
     resume: bool = True

@@ -31,12 +31,11 @@ import numpy as np
 
 from common.geo import euler_zyx, rot_zyx, wrap_angle
 from common.messages.base import Imu
-from common.messages.core import IMU_FRAME
+from common.messages.core import IMU_FRAME, NonNegative
 from common.robot import ImuMount
 from services.sim.robot import RobotState
 
 G = 9.80665
-NonNeg = Annotated[float, msgspec.Meta(ge=0)]
 
 
 class ImuConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -48,19 +47,19 @@ class ImuConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """Samples per sim second (the um7 driver's default rate is 20 Hz; 10 Hz is plenty
     for a tilt that changes over metres of ground and halves the bus load at 20x real
     time)."""
-    tilt_bias_sd_deg: NonNeg = 0.5
+    tilt_bias_sd_deg: NonNegative = 0.5
     """The SD of the tilt bias per axis, drawn once per run (deg): +-1 deg static is two
     sigma."""
-    tilt_noise_sd_deg: NonNeg = 0.05
+    tilt_noise_sd_deg: NonNegative = 0.05
     """White tilt noise per sample (deg)."""
     accel_leak: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.5
     """The share of the specific force the unit reads as tilt: pitch ``-a_long/g``, roll
     ``v*w/g`` (0.5 at the Husky's 1 m/s² is the +-3 deg dynamic bound)."""
-    gyro_noise_sd: NonNeg = 0.01
+    gyro_noise_sd: NonNegative = 0.01
     """The gyroscope's white noise (rad/s)."""
-    gyro_bias_sd: NonNeg = 0.005
+    gyro_bias_sd: NonNegative = 0.005
     """The SD of the gyroscope's bias per axis, drawn once per run (rad/s)."""
-    yaw_sd_deg: NonNeg = 5.0
+    yaw_sd_deg: NonNegative = 5.0
     """The SD of the yaw's (magnetometer's) error, drawn once per run (deg): beside the
     motors; nothing fuses it."""
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from common.arrays import F32, F64
 from common.geo import rot_zyx
+from common.messages.core import NonNegative, Positive
 from common.robot import LidarMount, default_robot
 from services.sim.robot import RobotState, pose_matrix
 from services.sim.scene import Scene
@@ -30,11 +31,11 @@ class LidarConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """The field of view (deg)."""
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.25
     """The angle between beams (deg)."""
-    min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.06
+    min_range: NonNegative = 0.06
     """The shortest range measured (m)."""
-    max_range: Annotated[float, msgspec.Meta(gt=0)] = 5.0
+    max_range: Positive = 5.0
     """The longest range measured (m)."""
-    sigma: Annotated[float, msgspec.Meta(ge=0)] = 0.02
+    sigma: NonNegative = 0.02
     """The range noise's 1-sigma (m)."""
 
 

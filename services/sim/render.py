@@ -32,6 +32,7 @@ import numpy as np
 
 from common.arrays import F32, F64, I32, U8
 from common.field import ScannerModel
+from common.messages.core import NonNegative, Positive
 from services.sim.scene import GROUND, LEAF_HIT, OBSTACLE, PLOT, POLE, SPHERE, STEM_HIT, Scene
 
 ARCSEC = math.pi / (180 * 3600)
@@ -52,9 +53,9 @@ class ScanSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     """The last azimuth swept (deg)."""
     step_deg: Annotated[float, msgspec.Meta(gt=0.005, le=45)] = 0.36
     """The angular step between rows and between columns (deg)."""
-    min_range: Annotated[float, msgspec.Meta(ge=0)] = 0.6
+    min_range: NonNegative = 0.6
     """The shortest range measured (m)."""
-    max_range: Annotated[float, msgspec.Meta(gt=0)] = 70.0
+    max_range: Positive = 70.0
     """The longest range measured (m)."""
 
     @classmethod
@@ -74,19 +75,19 @@ class ScanSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 class FaroNoise(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Range, angle and intensity errors; see the module docstring for sources."""
 
-    noise_floor_mm: Annotated[float, msgspec.Meta(ge=0)] = 0.3
+    noise_floor_mm: NonNegative = 0.3
     """``a`` of the ranging noise ``sigma^2 = a^2 + c * r * (0.1 / rho)^1.5`` (mm)."""
-    noise_slope_mm2_per_m: Annotated[float, msgspec.Meta(ge=0)] = 0.0067
+    noise_slope_mm2_per_m: NonNegative = 0.0067
     """``c`` of the ranging noise (mm²/m)."""
-    range_bias_mm: Annotated[float, msgspec.Meta(ge=0)] = 1.0
+    range_bias_mm: NonNegative = 1.0
     """The ranging error's bound (mm): a systematic offset drawn uniformly within it,
     once per scan."""
-    angle_sigma_arcsec: Annotated[float, msgspec.Meta(ge=0)] = 19.0
+    angle_sigma_arcsec: NonNegative = 19.0
     """The angular accuracy per axis (arcsec, 1-sigma)."""
     reflectivity_range_limit: bool = True
     """Drop weak returns as the lidar equation says (beyond 70 m x sqrt(rho / 0.9));
     false: keep all up to ``max_range``."""
-    intensity_noise: Annotated[float, msgspec.Meta(ge=0)] = 0.03
+    intensity_noise: NonNegative = 0.03
     """The intensity's relative noise (1-sigma)."""
 
 

@@ -21,6 +21,7 @@ import numpy.typing as npt
 from scipy.ndimage import gaussian_filter
 
 from common.arrays import F64
+from common.messages.core import Finite
 
 _JIT: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 
@@ -37,7 +38,7 @@ class TerrainConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
 
     slope_pct: Annotated[float, msgspec.Meta(ge=0, le=30)] = 1.0
     """The ground's slope (%)."""
-    slope_dir_deg: float = 30.0
+    slope_dir_deg: Finite = 30.0
     """The direction the ground rises towards, degrees CCW from the field +x axis."""
     bump_rms: Annotated[float, msgspec.Meta(ge=0, le=1)] = 0.03
     """The bumps' RMS height (m)."""

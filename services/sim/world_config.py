@@ -8,7 +8,7 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Positive
+from common.messages.core import Finite, NonNegative, Positive
 from services.sim import lidar as lidar_mod
 from services.sim.plant_config import FoliageConfig, TrialConfig
 from services.sim.render import FaroNoise
@@ -24,10 +24,10 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
     count: Annotated[int, msgspec.Meta(ge=0, le=50)] = 5
     """How many spheres are placed when ``sites`` is none."""
-    sites: list[tuple[float, float, float]] | None = None
+    sites: list[tuple[Finite, Finite, Finite]] | None = None
     """Explicit ``[x, y, pole_height]`` per target in the ``field`` frame; none: ``count``
     sites are chosen for the scan locations."""
-    scan_sites: list[tuple[float, float]] | None = None
+    scan_sites: list[tuple[Finite, Finite]] | None = None
     """The scan locations (``[x, y]``) the sites are chosen for; none: the field's
     candidate scan locations."""
     radius: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.1
@@ -48,14 +48,14 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     stop_clearance: Annotated[float, msgspec.Meta(ge=0, le=5)] = 1.0
     """A site's clearance from a scan location or the tour's origin (m), where the robot
     turns in place (0.6 m half-diagonal) and creeps during fine positioning."""
-    min_points: Annotated[float, msgspec.Meta(gt=0)] = 10.0
+    min_points: Positive = 10.0
     """Expected points on a sphere for it to count as seen by a scan: a known-radius
     fit of 10 points at 0.3-0.5 mm noise is good to about 1 mm."""
     step_deg: Annotated[float, msgspec.Meta(gt=0, le=10)] = 0.36
     """The scan step the placement plans for (deg; the paper's)."""
-    max_range: Annotated[float, msgspec.Meta(gt=0)] = 15.0
+    max_range: Positive = 15.0
     """The largest range a sphere is tried at (m)."""
-    min_separation: Annotated[float, msgspec.Meta(ge=0)] = 3.0
+    min_separation: NonNegative = 3.0
     """Spheres closer than this (m) would be confused by the matcher."""
     grid: Annotated[float, msgspec.Meta(gt=0.01, le=5)] = 0.2
     """The spacing of the candidate sites tried (m)."""
@@ -64,9 +64,9 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
     """An axis-aligned box standing on the ground (m)."""
 
-    x: float
+    x: Finite
     """Its centre's x in the ``field`` frame."""
-    y: float
+    y: Finite
     """Its centre's y."""
     size_x: Positive
     """Its size along x."""
@@ -81,9 +81,9 @@ class CylinderObstacle(
 ):
     """A vertical cylinder standing on the ground (a person's leg, a post) (m)."""
 
-    x: float
+    x: Finite
     """Its axis' x in the ``field`` frame."""
-    y: float
+    y: Finite
     """Its axis' y."""
     radius: Positive
     """Its radius."""
@@ -98,13 +98,13 @@ class SoilZone(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     """A rectangle of the field frame (m) with a soil of its own (the paper's southern
     paths: loose rocks)."""
 
-    x_min: float
+    x_min: Finite
     """Its lower x."""
-    y_min: float
+    y_min: Finite
     """Its lower y."""
-    x_max: float
+    x_max: Finite
     """Its upper x."""
-    y_max: float
+    y_max: Finite
     """Its upper y."""
     soil: Soil
     """Its traction factor for wheel slip, as the world's ``soil``."""

@@ -3,7 +3,7 @@ from typing import Annotated
 import msgspec
 
 from common.canopy import TRAITS
-from common.messages.core import RobotName
+from common.messages.core import Positive, RobotName
 
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 PosInt = Annotated[int, msgspec.Meta(gt=0)]
@@ -48,7 +48,7 @@ class VizConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     )
     """Globs, in the mission's run folder, of the registered cloud (LAZ in the field frame
     or a multi-scan E57 with poses)."""
-    trail_step_m: Annotated[float, msgspec.Meta(gt=0)] = 0.05
+    trail_step_m: Positive = 0.05
     """The driven trail's point spacing (m)."""
     trait: str = "height"
     """Which of :data:`common.canopy.TRAITS` the traits tab colours the plots by, once the

@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
+import msgspec
 import pytest
 from msgspec import inspect as mi
 
@@ -66,6 +67,36 @@ def test_generated_regions_are_the_codes() -> None:
 def test_every_option_has_a_meaning(cls: type) -> None:
     missing = [name for name, doc in field_docs(cls).items() if not doc]
     assert not missing, f"{_name(cls)}: no attribute docstring under {', '.join(missing)}"
+
+
+def _floats(t: mi.Type) -> list[mi.FloatType]:
+    """The float types within ``t`` (through unions, lists, tuples and dicts)."""
+    if isinstance(t, mi.FloatType):
+        return [t]
+    inner: list[mi.Type] = []
+    if isinstance(t, mi.UnionType):
+        inner = list(t.types)
+    elif isinstance(t, mi.TupleType):
+        inner = list(t.item_types)
+    elif isinstance(t, mi.ListType | mi.VarTupleType | mi.SetType | mi.FrozenSetType):
+        inner = [t.item_type]
+    elif isinstance(t, mi.DictType):
+        inner = [t.value_type]
+    return [f for i in inner for f in _floats(i)]
+
+
+@pytest.mark.parametrize("cls", config_structs(), ids=_name)
+def test_every_number_option_refuses_inf_and_nan(cls: type) -> None:
+    """A TOML ``inf`` or ``nan`` is one line naming the key, never a run gone wrong:
+    every float an option holds is bounded both ways (``common.messages.core``'s
+    ``Finite``, ``Positive``, ``NonNegative`` or bounds of its own)."""
+    open_ended = [
+        f.name
+        for f in msgspec.structs.fields(cls)
+        for t in _floats(mi.type_info(f.type))
+        if (t.ge, t.gt) == (None, None) or (t.le, t.lt) == (None, None)
+    ]
+    assert not open_ended, f"{_name(cls)}: unbounded numbers in {', '.join(open_ended)}"
 
 
 def test_every_mission_log_column_has_a_meaning() -> None:

@@ -38,7 +38,7 @@ import numpy as np
 
 from common import keys
 from common.messages.base import BatteryState, Imu, LaserScan
-from common.messages.core import BASE_FRAME, ODOM_FRAME
+from common.messages.core import BASE_FRAME, ODOM_FRAME, NonNegative, Positive
 from common.messages.sim import SimEncoders, SimWheelCommand
 from common.service import Context, run
 from services.base.drive import OdometryIntegrator
@@ -56,7 +56,7 @@ from services.base.ros2.types import (
 )
 from services.base.ros2.wire import NAME_PATTERN, NAMESPACE_PATTERN, SENSOR_QOS, TOPIC_PATTERN
 
-Cov6 = tuple[float, float, float, float, float, float]
+Cov6 = tuple[NonNegative, NonNegative, NonNegative, NonNegative, NonNegative, NonNegative]
 Topic = Annotated[str, msgspec.Meta(pattern=TOPIC_PATTERN)]
 # husky_control/config/control.yaml (husky_velocity_controller): x y z roll pitch yaw
 HUSKY_COVARIANCE: Cov6 = (0.001, 0.001, 0.001, 0.001, 0.001, 0.03)
@@ -103,9 +103,9 @@ class HuskySimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     twist_covariance: Cov6 = HUSKY_COVARIANCE
     """The diagonal (x, y, z, roll, pitch, yaw) of the twist covariance the odometry
     carries (husky_control's)."""
-    yaw_var: Annotated[float, msgspec.Meta(ge=0)] = IMU_YAW_VAR
+    yaw_var: NonNegative = IMU_YAW_VAR
     """The IMU's yaw variance (rad²)."""
-    cmd_vel_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 0.5
+    cmd_vel_timeout_s: Positive = 0.5
     """A stamped command older than this by the node's own clock is refused, and a zero
     stamp is taken as now (diff_drive_controller's ``cmd_vel_timeout``: its default,
     0.5 s, here; Clearpath's husky_control sets 0.25 s, the figure docs/devices.md

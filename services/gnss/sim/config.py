@@ -6,6 +6,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from common.messages.core import NonNegative
 from services.gnss.rtk_model import RtkModelConfig
 
 
@@ -27,10 +28,10 @@ class ReachFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     tests; the same faults can be triggered at run time by signals (SIGUSR1: drop the
     TCP links, SIGUSR2: garbage on the serial lines)."""
 
-    drop_links_at_s: list[float] = msgspec.field(default_factory=list)
+    drop_links_at_s: list[NonNegative] = msgspec.field(default_factory=list)
     """At these times every TCP client of every receiver is disconnected (the
     receiver's Wi-Fi link drops; its server keeps listening)."""
-    garbage_at_s: list[float] = msgspec.field(default_factory=list)
+    garbage_at_s: list[NonNegative] = msgspec.field(default_factory=list)
     """At these times ``garbage`` is written into every serial line between two epochs
     (line noise)."""
     garbage: str = "\x00\xff\xfe~#noise$GNGGA,12,,*ZZ\r\n$$$\x7f\r\n"
