@@ -27,6 +27,7 @@ from services.base.ros2_convert import (
     decode_odometry,
     decode_scan,
     imu_from_ros,
+    odom_from_ros,
     scan_from_ros,
 )
 
@@ -111,9 +112,10 @@ class Ros2Base:
     command) and one log line says so, another when odometry is back; the health
     counter ``ros2_odom_stale`` is 1 meanwhile.
 
-    An Imu or a BatteryState with a value that is not finite or out of the bus
-    message's bounds is dropped: counted in the health counters ``ros2_imu_refused``
-    and ``ros2_battery_refused``, the first one logged (payloads that are not CDR at
+    An Odometry, an Imu or a BatteryState with a value that is not finite or out of
+    the bus message's bounds is dropped: counted in the health counters
+    ``ros2_odom_refused``, ``ros2_imu_refused`` and ``ros2_battery_refused``, the first
+    one logged (payloads that are not CDR at
     all are dropped and counted as for odometry)."""
 
     def __init__(self, cfg: BaseConfig, bus: Bus, sinks: Sinks) -> None:
@@ -122,17 +124,11 @@ class Ros2Base:
         self._watch = OdomWatch(int(cfg.ros2_odom_timeout_s * 1e9))
         bus.report("ros2_odom_stale", lambda: int(self._watch.stale))
 
+        odoms = Refusals(bus, "ros2_odom_refused", "odometry from the ROS 2 base")
+
         def odom(m: ros.Odometry) -> None:
             self._watch.heard()
-            p, t = m.pose.pose, m.twist.twist
-            sinks.odom(
-                ros.ns_of_time(m.header.stamp),
-                p.position.x,
-                p.position.y,
-                ros.yaw_of(p.orientation),
-                t.linear.x,
-                t.angular.z,
-            )
+            odoms.passed(odom_from_ros, m, lambda o: sinks.odom(*o))
 
         def scan(m: ros.LaserScan) -> None:
             sinks.scan(scan_from_ros(m))

@@ -29,6 +29,29 @@ def decode_battery(data: bytes) -> ros.BatteryState:
     return ros.BatteryState.deserialize(data)
 
 
+Odom = tuple[int, float, float, float, float, float]
+
+
+def odom_from_ros(m: ros.Odometry) -> Odom:
+    """(stamp ns, x, y, yaw, v, w) of a nav_msgs/Odometry, in the ``odom`` frame.
+    Raises ValueError naming the value when one is not finite (navigation would
+    integrate it into every pose after) or the orientation is no rotation."""
+    p, t = m.pose.pose, m.twist.twist
+    q = p.orientation
+    values = {
+        "pose.position.x": p.position.x,
+        "pose.position.y": p.position.y,
+        "pose.orientation": math.fsum((q.x, q.y, q.z, q.w)),
+        "twist.linear.x": t.linear.x,
+        "twist.angular.z": t.angular.z,
+    }
+    for name, v in values.items():
+        if not math.isfinite(v):
+            raise ValueError(f"odometry {name} is not finite")
+    yaw = ros.yaw_of(q)
+    return ros.ns_of_time(m.header.stamp), p.position.x, p.position.y, yaw, t.linear.x, t.angular.z
+
+
 def imu_from_ros(m: ros.Imu) -> Imu:
     """The bus message of a sensor_msgs/Imu: orientation as ZYX Euler angles,
     ``tilt_var`` the mean of the roll and pitch variances the driver states. Raises

@@ -200,3 +200,26 @@ def test_emulated_clearpath_driver_ages_stamped_commands() -> None:
     assert twist_of(stamped) == ros.twist(0.2, 0.0) == twist_of(ros.twist(0.2, 0.0))
     with pytest.raises(ConfigError):
         decode_section({"backend": "ros2", "ros2_cmd_vel_type": "Twist2"}, BaseConfig, "base")
+
+
+def _odom(x: float = 1.0, v: float = 0.2, yaw: float = 0.5) -> ros.Odometry:
+    cov = [0.0] * 36
+    return ros.odometry(3 * MS, "odom", "base_link", (x, 2.0, yaw), (v, 0.1), cov, cov)
+
+
+def test_odometry_with_a_value_that_is_not_finite_is_refused(
+    client_bus: Bus, caplog: pytest.LogCaptureFixture
+) -> None:
+    cfg = BaseConfig(backend="ros2", ros2_layout="bridge", ros2_odom="t/odom")
+    odoms: Record[tuple[float, ...]] = Record()
+    Ros2Base(cfg, client_bus, Sinks(odom=lambda *o: odoms.add(o)))
+    with caplog.at_level(logging.WARNING):
+        client_bus.put_raw("t/odom", _odom(x=math.nan).serialize())
+        client_bus.put_raw("t/odom", _odom(v=math.inf).serialize())
+        client_bus.put_raw("t/odom", _odom(x=1.5).serialize())
+        # one publisher, one key: in order, so the good one arrives after the bad ones
+        assert odoms.until(bool, timeout=5.0)
+    assert len(odoms) == 1 and odoms[0][1:] == pytest.approx((1.5, 2.0, 0.5, 0.2, 0.1))
+    assert client_bus.reports()["ros2_odom_refused"] == 2
+    refused = [r for r in caplog.records if "odometry from the ROS 2 base refused" in r.message]
+    assert len(refused) == 1 and "pose.position.x" in refused[0].message, caplog.text

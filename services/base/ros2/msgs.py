@@ -32,6 +32,10 @@ from services.base.ros2.idl import (
     Vector3,
 )
 
+# gimbal lock is documented where it arises (euler_of), not an error; one filter for
+# the process, as catch_warnings() around each call is not thread-safe
+warnings.filterwarnings("ignore", message="Gimbal lock detected", category=UserWarning)
+
 __all__ = [
     "POWER_SUPPLY_HEALTH_GOOD",
     "POWER_SUPPLY_STATUS_DISCHARGING",
@@ -130,12 +134,14 @@ def quaternion_of_euler(roll: float, pitch: float, yaw: float) -> Quaternion:
 def euler_of(q: Quaternion) -> tuple[float, float, float]:
     """ZYX Euler angles (roll, pitch, yaw; rad) of a quaternion, normalised first (a
     zero quaternion reads as no rotation). Pitch is in [-pi/2, pi/2]; at +-pi/2 roll
-    and yaw are not separable (gimbal lock)."""
+    and yaw are not separable (gimbal lock). Raises ValueError for a quaternion that
+    is not finite or too short to normalise."""
     if q.x == q.y == q.z == q.w == 0.0:
         return 0.0, 0.0, 0.0
-    with warnings.catch_warnings():  # gimbal lock is documented above, not an error
-        warnings.simplefilter("ignore", UserWarning)
-        yaw, pitch, roll = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_euler("ZYX")
+    c = (q.x, q.y, q.z, q.w)
+    if not all(math.isfinite(v) for v in c):
+        raise ValueError(f"quaternion {c} is not finite")
+    yaw, pitch, roll = Rotation.from_quat(c).as_euler("ZYX")  # ValueError: zero norm
     return float(roll), float(pitch), float(yaw)
 
 
