@@ -12,10 +12,10 @@ from __future__ import annotations
 import math
 
 from common.geo import wrap_angle
-from common.messages.nav import ARRIVAL_TOLERANCE_M, LEASE_ENDED, Leg, NavState
+from common.messages.nav import ARRIVAL_TOLERANCE_M, LEASE_ENDED, Leg, NavState, legs_length
 from services.nav.fine import Fine
 from services.nav.follower_config import FollowerConfig
-from services.nav.follower_types import Command, Phase, Tick, leg_length
+from services.nav.follower_types import Command, Phase, Tick
 from services.nav.pursuit import (
     aim_at,
     along_remaining,
@@ -114,7 +114,7 @@ class Follower:
 
     def _remaining(self, x: float, y: float) -> float:
         leg = self.legs[self.leg]
-        rest = sum(leg_length(lg) for lg in self.legs[self.leg + 1 :])
+        rest = legs_length(self.legs[self.leg + 1 :])
         return max(0.0, along_remaining(x, y, leg.x0, leg.y0, leg.x1, leg.y1)) + rest
 
     def step(
@@ -178,7 +178,7 @@ class Follower:
     def _align(self, k: Tick) -> Command | None:
         """Turn in place toward the leg's look-ahead point, then drive."""
         aim = wrap_angle(k.yaw - aim_at(k.x, k.y, k.leg, self.cfg.lookahead_m))
-        if leg_length(k.leg) <= self.cfg.goal_tolerance_m or abs(aim) <= math.radians(
+        if k.leg.length <= self.cfg.goal_tolerance_m or abs(aim) <= math.radians(
             self.cfg.align_tolerance_deg
         ):
             self.phase = Phase.DRIVE
@@ -239,7 +239,7 @@ class Follower:
         # its heading and backs up along the leg, so once turned to another
         # planned heading it could no longer correct its place along the leg
         leg, fine, tol = k.leg, self.fine, math.radians(self.cfg.heading_tolerance_deg)
-        along = leg_length(leg) > 0
+        along = leg.length > 0
         final = leg.final_yaw if leg.final_yaw is not None else k.heading if along else k.yaw
         goal_yaw = final if fine.placed or not along else k.heading
         ferr = wrap_angle(k.yaw - goal_yaw)
@@ -255,7 +255,7 @@ class Follower:
             and fine.reapproach(k.t, k.xte)
         ):
             self.phase = Phase.BACKUP
-            self._backup_to = min(self.cfg.reapproach_m, leg_length(leg))
+            self._backup_to = min(self.cfg.reapproach_m, leg.length)
             self.speed_limit = min(self.speed_limit, self.cfg.reapproach_speed)
             return self._out(k, 0.0, 0.0, NavState.POSITIONING)
         # the robot can only creep along its heading: the goal's offset that way
@@ -284,7 +284,7 @@ class Follower:
             self.phase = Phase.ALIGN
             return self._out(k, 0.0, 0.0, NavState.DRIVING)
         yaw_goal = leg.final_yaw if leg.final_yaw is not None else k.heading
-        return self._arrive(k, wrap_angle(k.yaw - yaw_goal) if leg_length(leg) > 0 else 0.0)
+        return self._arrive(k, wrap_angle(k.yaw - yaw_goal) if leg.length > 0 else 0.0)
 
     def _arrive(self, k: Tick, yaw_err: float) -> Command:
         """ARRIVED when the estimate is within the arrival tolerances of the route's

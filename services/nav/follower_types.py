@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-import math
 
 from common.messages.nav import Leg, NavState
 
@@ -48,7 +47,3 @@ class Tick:
     xte: float
     herr: float
     togo: float
-
-
-def leg_length(leg: Leg) -> float:
-    return math.hypot(leg.x1 - leg.x0, leg.y1 - leg.y0)
