@@ -76,6 +76,8 @@ def round_trip_halves(legs: list[Leg]) -> tuple[list[Leg], list[Leg]]:
 #: how far from a route's end (m) its follower may stop and still have arrived, unless
 #: the route says otherwise: a scan location's, the mission's ``arrival_tolerance_m``
 ARRIVAL_TOLERANCE_M = 0.05
+#: an arrival tolerance (m), as a route carries it and a mission's config gives it
+ArrivalTolerance = Annotated[float, msgspec.Meta(gt=0, le=100.0)]
 
 
 class FollowRoute(msgspec.Struct, frozen=True, tag=True):
@@ -96,7 +98,7 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
     max_speed: Annotated[float, msgspec.Meta(gt=0, le=2.0)] = 0.5
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
     join: bool = False
-    arrival_tolerance_m: Annotated[float, msgspec.Meta(gt=0, le=100.0)] = ARRIVAL_TOLERANCE_M
+    arrival_tolerance_m: ArrivalTolerance = ARRIVAL_TOLERANCE_M
 
 
 class CancelRoute(msgspec.Struct, frozen=True, tag=True):

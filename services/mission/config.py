@@ -4,7 +4,7 @@ import msgspec
 
 from common.battery import Pace
 from common.messages.core import Positive, RobotName
-from common.messages.nav import ARRIVAL_TOLERANCE_M
+from common.messages.nav import ARRIVAL_TOLERANCE_M, ArrivalTolerance
 from common.messages.scan import ScanProfile
 
 
@@ -64,7 +64,7 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     """The slowest a route's allowance counts on driving (m/s)."""
     settle_timeout_s: Positive = 900.0
     """How long the robot may take to stand still and localized before a scan."""
-    arrival_tolerance_m: Positive = ARRIVAL_TOLERANCE_M
+    arrival_tolerance_m: ArrivalTolerance = ARRIVAL_TOLERANCE_M
     """How far the pose estimate may be from the planned location before a scan starts
     (each route to a location carries it: navigation arrives within it or fails)."""
     scan_tolerance_m: Positive = 0.10

@@ -59,7 +59,7 @@ class NavConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """A route with a leg ending farther than this outside the field's boundary is
     refused (reply ``accepted = false``, the reason names the leg): the survey, the
     drive home and the experiments stay within metres of it, so such a route is
-    mistyped or forged (one 12,700 km away once set the robot turning towards it)."""
+    mistyped or forged, and following it would turn the robot towards it."""
     max_fix_age_s: Positive = 0.25
     """The dead-reckoning allowance: with no RTK-fixed position fused for this long the
     robot is not localized and stops. 0.25 s (one fix at 10 Hz may go missing) at 0.5 m/s
