@@ -125,7 +125,7 @@ def test_defaults_are_the_runtime_values() -> None:
     from services.mission.config import MissionConfig
 
     table = struct_table(MissionConfig, "services.mission")
-    assert "| `arrival_tolerance_m` | number > 0 | 0.05 |" in table
+    assert "| `arrival_tolerance_m` | number > 0, ≤ 100 | 0.05 |" in table
     assert "| `profile` | table | `{ scan_id = 1, resolution = 8, quality = 2 }` |" in table
 
 
