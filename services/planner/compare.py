@@ -19,16 +19,21 @@ MAX_NODES = 14
 
 def lengths_by_nav(fld: Field, result: PlanResult) -> dict[str, float]:
     """The optimal tour length (m) over ``result``'s locations and the Origin under
-    each navigation mode, with the plan's open lanes; empty beyond ``MAX_NODES``."""
+    each navigation mode, with the plan's open lanes (the plan's own mode: its tour);
+    a mode whose optimum is not proven within the plan's tour time limit is left out,
+    and all are beyond ``MAX_NODES``."""
     if len(result.selected) + 1 > MAX_NODES:
         return {}
     index = {int(c): k for k, c in enumerate(fld.cand_ids)}
     pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[[index[c] for c in result.selected]]])
     opt = result.options
-    return {
-        mode: circuit_cpsat(
-            Navigator(fld, mode, opt.open_rows, opt.open_cross).distances(pts),
-            opt.tour_time_limit_s,
-        ).length
-        for mode in NAV_MODES
-    }
+    out: dict[str, float] = {}
+    for mode in NAV_MODES:
+        if mode == result.tour.nav and result.tour.status == "optimal":
+            out[mode] = result.tour.length
+            continue
+        d = Navigator(fld, mode, opt.open_rows, opt.open_cross).distances(pts)
+        tour = circuit_cpsat(d, opt.tour_time_limit_s)
+        if tour.status == "optimal":
+            out[mode] = tour.length
+    return out
