@@ -46,10 +46,10 @@ class GeoSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """The scanner's least horizontal distance to any plot at a candidate (m)."""
     robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
     """Half the length of the footprint that must fit at a candidate (m); by default half
-    the robot description's ``[footprint]``."""
+    the shipped robot description's ``[footprint]``."""
     robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
     """Half the width of the footprint that must fit at a candidate (m); by default half
-    the robot description's ``[footprint]``."""
+    the shipped robot description's ``[footprint]``."""
     origin_alt: Altitude = 0.0
     """Height of the field frame's origin above the WGS84 ellipsoid (m)."""
     start_corner: Corner = "bottom-right"

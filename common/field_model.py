@@ -73,12 +73,13 @@ Book = Annotated[tuple[PlotRecord, ...], msgspec.Meta(max_length=MAX_PLOTS)]
 
 
 def default_half_length() -> float:
-    """Half the length of the robot description's footprint (m)."""
+    """Half the length of the shipped robot description's footprint (m;
+    ``common/robots/husky.toml``): a field planned for another robot gives its own."""
     return default_robot().footprint.length / 2
 
 
 def default_half_width() -> float:
-    """Half the width of the robot description's footprint (m)."""
+    """Half the width of the shipped robot description's footprint (m)."""
     return default_robot().footprint.width / 2
 
 
@@ -120,10 +121,10 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     minimum range)."""
     robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
     """Half the length of the footprint that must fit at a candidate (m); by default half
-    the robot description's ``[footprint]`` (the Husky A200's)."""
+    the shipped robot description's ``[footprint]`` (the Husky A200's)."""
     robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
     """Half the width of the footprint that must fit at a candidate (m); by default half
-    the robot description's ``[footprint]``."""
+    the shipped robot description's ``[footprint]``."""
     origin_lat: Annotated[float, msgspec.Meta(ge=-90, le=90)] | None = None
     """WGS84 latitude of the field frame's origin (deg); without ``origin_lat`` and
     ``origin_lon`` the field has no georeference (docs/configuration.md)."""

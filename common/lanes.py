@@ -155,8 +155,7 @@ def central_cross_lane(xs: F64, pts: F64) -> int:
     """The cross lane (of those at ``xs``) whose intersections with the edge lanes are
     nearest, in summed distance along the lanes, to the locations ``pts`` (M, 2): a
     location is reached along an edge lane, then up its own cross lane, so only the
-    distance along the edge depends on the choice; the least sum is at the cross
-    lane nearest the median of the locations' x (ties to the lower index)."""
+    distance along the edge depends on the choice (ties to the lower index)."""
     cost = np.abs(xs[:, None] - pts[None, :, 0]).sum(axis=1)
     return int(np.argmin(cost))
 

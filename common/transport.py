@@ -203,9 +203,13 @@ class Bus:
         such as ``rpc/*/config``) and return each good reply, as they came within
         ``timeout`` seconds; error and undecodable replies are left out."""
         rpc = rpc.within(self.namespace)
-        every = zenoh.QueryTarget.ALL, zenoh.ConsolidationMode.NONE
-        replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout,
-                                   target=every[0], consolidation=every[1])  # fmt: skip
+        replies = self.session.get(
+            rpc.key,
+            payload=encode(request),
+            timeout=timeout,
+            target=zenoh.QueryTarget.ALL,
+            consolidation=zenoh.ConsolidationMode.NONE,
+        )
         return good_replies(replies, rpc, self._dropped)
 
     def watch_alive(self, callback: Callable[[str, bool], object]) -> None:
