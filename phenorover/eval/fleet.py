@@ -36,6 +36,7 @@ import msgspec
 
 from common import keys
 from common.client import open_client, wait_alive
+from common.clock import NS
 from common.config import load_manifest
 from common.field import load_field
 from common.files import write_atomic
@@ -48,7 +49,6 @@ from common.transport import Bus
 from phenorover.eval.relay import Relay
 from phenorover.launcher import Launcher
 
-NS = 1_000_000_000
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy" / "fleet"
 ALIVE_S = 900.0  # how long a deployment may take to come up (the world's build)
 

@@ -11,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
+from common.clock import NS
 from common.field import load_field
 from common.lanes import LaneMap, footprint_radius, plan_lanes
 from common.missionlog import read_log
 from common.robot import load_robot
-from phenorover.eval.fleet import NS, Outcome
+from phenorover.eval.fleet import Outcome
 
 
 @dataclasses.dataclass(frozen=True)

@@ -56,7 +56,7 @@ FLUSH_S = 2.0  # on stop: the rest of the stream to a dashboard that is alive
 
 class TruthView:
     """Truth poses from ``bus``, logged on :meth:`tick` into the recording of the
-    dashboard alive on ``machine`` (none alive: kept until one is)."""
+    dashboard alive on ``machine`` (none alive: they are dropped until one is)."""
 
     def __init__(
         self, bus: Bus, cfg: VizConfig, robot: Robot, machine: str, sim_time: bool

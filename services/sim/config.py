@@ -22,8 +22,9 @@ class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     namespace: RobotName
     """Its manifest's namespace: its devices are on that namespace's keys."""
     start: tuple[Finite, Finite, Finite] | None = None
-    """Its start pose ``[x, y, yaw_deg]`` (m, deg); none: its home beside the field by the
-    Origin's corner, facing the field, where a split plan has it park."""
+    """Its start pose ``[x, y, yaw_deg]`` (m, deg); none: its home from
+    :func:`common.lanes.homes` (edge lanes in turn from the Origin's cross lane), facing
+    the field, where a plan with ``home = "origin"`` parks it."""
 
 
 class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -79,8 +80,8 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """How far the simulator yields the CPU to the services it feeds (a Unix nice
     increment, 0: not at all). On a machine too busy for ``real_time_factor`` the world
     then slows down, as the services are not able to in the field: at the same priority
-    it kept its pace and the services fell seconds of sim time behind their own sensors,
-    for good (a backlog a saturated machine never drains)."""
+    it would keep its pace and the services fall seconds of sim time behind their own
+    sensors, for good (a backlog a saturated machine never drains)."""
     start_held: bool = False
     """In lockstep (the manifest's ``lockstep``), the world stands at its start until
     asked to run (``rpc/sim/run``): whoever starts a survey or an experiment does so

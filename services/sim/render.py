@@ -1,4 +1,4 @@
-"""Simulated FARO Focus S70 scans and their E57 files.
+"""Simulated FARO Focus S70 scans (written as E57 by :func:`common.pointcloud.write_e57`).
 
 Angles: the scanner sweeps elevation (0 = horizontal, up positive) from
 ``vertical_start_deg`` to ``vertical_end_deg`` and azimuth (counter-clockwise from

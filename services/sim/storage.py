@@ -1,14 +1,11 @@
-"""Where the simulator may write, and writing there so a reader never sees half a file.
+"""Where the simulator may write.
 
 The render RPC names the E57 file to write (the scanner's card, as a real FARO writes
 its own card). A request is a message from the network, so its path is resolved
 (``..`` and symlinks followed) and must lie under the configured scan folder, each
 name in it matching :data:`common.messages.core.FileName`'s pattern; anything else is
-refused with a line naming ``RenderRequest.path``.
-
-Files are written beside their final name, flushed to disk and renamed over it
-(:func:`common.files.atomic_path`, durable): a crash leaves the old file or none,
-never a truncated one.
+refused with a line naming ``RenderRequest.path``. The file itself is written whole
+or not at all by :func:`common.pointcloud.write_e57` (durable).
 """
 
 from __future__ import annotations

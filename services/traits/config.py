@@ -73,9 +73,9 @@ class TraitsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     ground: GroundConfig = GroundConfig()
     """How the ground is found."""
     min_seen: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.5
-    """A plot whose footprint cells holding a point are fewer than this share (seen from
-    both lanes over less than this share of its length) is flagged ``occluded``: its
-    traits describe only the part the scanner saw."""
+    """A plot seen from both lanes over less than this share of its length (its ``seen``
+    trait, :mod:`common.canopy`) is flagged ``occluded``: its traits describe only the
+    part the scanner saw."""
     figures: bool = True
     """Write ``fieldmap.png`` (and a season's ``growth.png``)."""
     stable_margin: Annotated[float, msgspec.Meta(ge=0.0, le=5.0)] = 0.3

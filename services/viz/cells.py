@@ -1,4 +1,5 @@
-"""The field cells a plan's view counts belong to, for the dashboard. Pure."""
+"""The field cells a plan's view counts belong to, for the dashboard (the plan's field
+file is read)."""
 
 from __future__ import annotations
 

@@ -107,13 +107,6 @@ class FleetView:
         self.plans[ns] = plan
         colour = COLOURS[self.robots.index(ns) % len(COLOURS)]
         legs = [[[g.x0, g.y0, scene.ROUTE_Z], [g.x1, g.y1, scene.ROUTE_Z]] for g in plan.legs]
-        fp = self.robot.footprint
-        body = rr.Boxes3D(
-            half_sizes=[[fp.length / 2, fp.width / 2, fp.height / 2]],
-            centers=[[0.0, 0.0, fp.height / 2]],
-            colors=[colour],
-            labels=[ns],
-        )
         by_id = {c.id: c for c in plan.candidates}
         mine = [by_id[i] for i in plan.selected if i in by_id]
         locations = rr.Points3D(
@@ -125,7 +118,7 @@ class FleetView:
         entries = [
             Entry(f"fleet/{ns}/route", rr.LineStrips3D(legs, colors=[colour], radii=[0.05]), True),
             Entry(f"fleet/{ns}/locations", locations, True),
-            Entry(f"fleet/{ns}/estimate/body", body, True),
+            scene.body(f"fleet/{ns}/estimate/body", self.robot, colour, label=ns),
         ]
         if not self.field_drawn:  # the plots and candidates: the same in every share
             shared = ("field/plots", "field/candidates")

@@ -85,9 +85,11 @@ def blueprint() -> Any:
     )
 
 
-def body(path: str, robot: Robot, colour: tuple[int, ...], solid: bool = False) -> Entry:
+def body(
+    path: str, robot: Robot, colour: tuple[int, ...], solid: bool = False, label: str = ""
+) -> Entry:
     """``robot``'s footprint as a box standing on the ground under the transform at
-    ``path``'s parent (static)."""
+    ``path``'s parent (static), named ``label`` in the view when given."""
     fp = robot.footprint
     half = [[fp.length / 2, fp.width / 2, fp.height / 2]]
     box = rr.Boxes3D(
@@ -95,6 +97,7 @@ def body(path: str, robot: Robot, colour: tuple[int, ...], solid: bool = False) 
         centers=[[0.0, 0.0, fp.height / 2]],
         colors=[colour],
         fill_mode="solid" if solid else None,
+        labels=[label] if label else None,
     )
     return Entry(path, box, static=True)
 
