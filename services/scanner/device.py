@@ -7,7 +7,6 @@ on the scanner's card. :func:`open_device` opens the one the config names.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
@@ -18,12 +17,9 @@ from common.service import Context
 from services.scanner.config import ScannerConfig
 from services.scanner.slcan_host import SlcanHost
 
-__all__ = ["BusOffGate", "CanDevice", "Device", "open_device", "scan_path"]
+__all__ = ["CanDevice", "Device", "open_device", "scan_path"]
 
 log = logging.getLogger(__name__)
-
-# the emulated scan advances this often (sim time): twice its status period of 0.1 s
-TICK_HZ = 20.0
 
 
 class CanDevice:
@@ -63,39 +59,6 @@ class CanDevice:
             self.bus.shutdown()
         except (can.CanError, OSError) as exc:
             log.warning("scanner: CAN %s did not close cleanly: %s", self.name, exc)
-
-
-class BusOffGate(can.BusABC):
-    """The client's end of a bus whose scanner node may go bus-off (the emulator's
-    ``bus_off`` fault): while ``off()`` holds, :meth:`send` raises
-    ``can.CanOperationError`` (as python-can's socketcan does when a frame finds no
-    node to acknowledge it and the transmit queue fills: ENOBUFS) and ``state`` is
-    ``BusState.ERROR``; otherwise it passes through to ``inner``, which it owns."""
-
-    def __init__(self, inner: can.BusABC, off: Callable[[], bool]) -> None:
-        super().__init__(channel=inner.channel_info)
-        self.channel_info = f"{inner.channel_info} (bus-off fault gate)"
-        self._inner, self._off = inner, off
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        if self._off():
-            raise can.CanOperationError("Failed to transmit: bus-off (simulated fault)")
-        self._inner.send(msg, timeout)
-
-    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        return self._inner.recv(timeout), False
-
-    @property
-    def state(self) -> can.BusState:
-        return can.BusState.ERROR if self._off() else self._inner.state
-
-    @state.setter
-    def state(self, new_state: can.BusState) -> None:
-        self._inner.state = new_state
-
-    def shutdown(self) -> None:
-        super().shutdown()
-        self._inner.shutdown()
 
 
 class Device(Protocol):

@@ -18,7 +18,7 @@ import pytest
 
 from services.scanner.can_codec import ScanProfile, ScanState
 from services.scanner.client import AckTimeout, CommandRejected, ScannerClient, ScannerStatus
-from services.scanner.device import BusOffGate
+from services.scanner.sim.device import BusOffGate
 from services.scanner.sim.emulator import FaroEmulator, FaroFaults, default_scan_duration_s
 
 PROFILE = ScanProfile(resolution_index=4, quality=2)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Callable
 
 import can
 
@@ -12,8 +13,43 @@ from common import clock as clk
 from common.clock import Clock
 from common.service import Context
 from services.scanner.config import ScannerConfig
-from services.scanner.device import TICK_HZ, BusOffGate
 from services.scanner.sim.card import RenderedCard, emulate
+
+# the emulated scan advances this often (sim time): twice its status period of 0.1 s
+TICK_HZ = 20.0
+
+
+class BusOffGate(can.BusABC):
+    """The client's end of a bus whose scanner node may go bus-off (the emulator's
+    ``bus_off`` fault): while ``off()`` holds, :meth:`send` raises
+    ``can.CanOperationError`` (as python-can's socketcan does when a frame finds no
+    node to acknowledge it and the transmit queue fills: ENOBUFS) and ``state`` is
+    ``BusState.ERROR``; otherwise it passes through to ``inner``, which it owns."""
+
+    def __init__(self, inner: can.BusABC, off: Callable[[], bool]) -> None:
+        super().__init__(channel=inner.channel_info)
+        self.channel_info = f"{inner.channel_info} (bus-off fault gate)"
+        self._inner, self._off = inner, off
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._off():
+            raise can.CanOperationError("Failed to transmit: bus-off (simulated fault)")
+        self._inner.send(msg, timeout)
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        return self._inner.recv(timeout), False
+
+    @property
+    def state(self) -> can.BusState:
+        return can.BusState.ERROR if self._off() else self._inner.state
+
+    @state.setter
+    def state(self, new_state: can.BusState) -> None:
+        self._inner.state = new_state
+
+    def shutdown(self) -> None:
+        super().shutdown()
+        self._inner.shutdown()
 
 
 class SimDevice:

@@ -48,7 +48,7 @@ class FaroFaults(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     scanner's CAN node goes bus-off for this long, once: it sends and hears nothing (the
     scan itself goes on), and the client's sends fail with ``can.CanOperationError``,
     as python-can reports a bus with no one to acknowledge
-    (:class:`services.scanner.device.BusOffGate`; across an SLCAN link,
+    (:class:`services.scanner.sim.device.BusOffGate`; across an SLCAN link,
     :mod:`services.scanner.sim.slcan_device` reports it as an adapter does). A scan
     that completes meanwhile reports DONE once the bus is back, but its Inclinometer
     frame is lost."""
