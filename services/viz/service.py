@@ -81,6 +81,8 @@ class VizService:
         self._scan_poses: dict[int, PoseEstimate] = {}
         self._jobs: queue.Queue[Callable[[], None] | None] = queue.Queue(maxsize=64)
         self.superseded = 0  # messages replaced by a newer one before being drawn
+        self.drawn = 0  # the newest messages drawn, in the heartbeat: the view keeps up
+        ctx.bus.report("messages_drawn", lambda: self.drawn)
         for name, topic in LATEST.items():
             ctx.bus.subscribe(topic, functools.partial(self._put, name))
         ctx.bus.subscribe(keys.MISSION_EVENT, self._on_event)
@@ -145,6 +147,7 @@ class VizService:
             self._events.clear()
             done = list(self._done)
             self._done.clear()
+            self.drawn += len(new)
         # the plan and the mission first: a new mission's file must exist before the
         # data of the same tick is logged
         for name in ("plan", "state", *[k for k in LATEST if k not in ("plan", "state")]):
