@@ -91,7 +91,7 @@ def toml(v: Any) -> str:
         return number(v)
     if isinstance(v, str):
         return '"' + "".join(_ESCAPES.get(c) or _escape(c) for c in v) + '"'
-    if isinstance(v, list):
+    if isinstance(v, list | tuple):  # a TOML array either way
         return "[" + ", ".join(toml(x) for x in v) + "]"
     if isinstance(v, dict):
         items = [f"{k} = {toml(x)}" for k, x in v.items() if x is not None]

@@ -69,7 +69,8 @@ def tiny() -> tuple[FieldLayout, Field]:
 def test_the_shipped_husky_is_the_default_and_deploy_names_the_same_file() -> None:
     r = load_robot("")
     assert r == default_robot() == load_robot("husky") == load_robot(ROBOTS_DIR / "husky.toml")
-    for m in (REPO / "deploy").glob("*.toml"):  # the shipped manifests: the one file
+    # the shipped manifests, the fleet's too: the one file
+    for m in (REPO / "deploy").rglob("*.toml"):
         assert robot_path(load_manifest(m).robot) == ROBOTS_DIR / "husky.toml", m
     assert r.name == "husky-a200"
     assert [a.name for a in r.antennas] == ["gnss_1", "gnss_2"]

@@ -127,7 +127,8 @@ def test_a_scan_reports_progress_then_done_with_its_file(scanner: Scanner) -> No
 
 def test_a_stopped_scan_is_never_done_nor_stored(scanner: Scanner) -> None:
     start_scan(scanner.bus, 2)
-    scanner.status.wait_for(lambda s: s.scan_id == 2 and s.progress > 0, 10.0)
+    running = scanner.status.wait_for(lambda s: s.scan_id == 2 and s.progress > 0, 10.0)
+    assert running is not None, "scan 2 never ran: there would be nothing to stop"
     scanner.bus.call(keys.SCANNER_CMD, StopScan(), timeout=5.0)
     scanner.wait(2, ScannerState.IDLE)
     start_scan(scanner.bus, 3)  # the next scan runs through: the stopped one is over

@@ -142,3 +142,9 @@ def test_a_text_default_is_a_toml_string() -> None:
     from phenorover.refdocs_tables import toml
 
     assert toml('a"\\b\r\n\x00\xff') == '"a\\"\\\\b\\r\\n\\u0000\\u00ff"'
+
+
+def test_a_tuple_default_is_a_toml_array() -> None:
+    from phenorover.refdocs_tables import toml
+
+    assert toml(()) == "[]" and toml((0.5, 1)) == "[0.5, 1]" and toml([(1, 2)]) == "[[1, 2]]"

@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 
 from common import keys
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 # the product: these trees but the simulators in them
 PRODUCT_TREES = ("common", "services")
 SIMULATORS = ("services/sim/**/*.py", "services/*/sim/**/*.py")
