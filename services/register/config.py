@@ -78,8 +78,8 @@ class RefineConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
     position fixes the graph's rotation as well as its place (scans tens of metres
     apart, each placed to millimetres, hold the whole block's heading better than any
     one compass reading). Ours, the estimate at the scan's end after minutes of
-    standing (filter SD 3-5 mm under the crop; 3-4 mm against the truth in the
-    simulated ENGR surveys): 5 mm. A filter that forgets while standing (the paper's)
+    standing: 5 mm, of the order of the filter's own position SD there (the mission
+    log's ``sd_x``, ``sd_y``). A filter that forgets while standing (the paper's)
     is worth about 2 cm, and its profile says so."""
     nav_sigma_z: Positive = 0.05
     """The navigation prior in z (m)."""
