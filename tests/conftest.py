@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import pytest
 import zenoh
@@ -170,3 +170,19 @@ def engr_split() -> PlanResult:
     layout, fld = load_field("engr")
     opt = PlanOptions(robots=2, tour_time_limit_s=1.0, pace=Pace(speed=0.5, location_s=300.0))
     return plan(layout, field=fld, options=opt)
+
+
+class FakeBus:
+    """A bus that keeps each subscription's and liveliness watch's callback, by key;
+    nothing is sent (a test calls them as the bus would)."""
+
+    def __init__(self) -> None:
+        self.subs: dict[str, Callable[[Any], object]] = {}
+        self.watched: dict[str, Callable[[str, bool], object]] = {}
+        self.namespace = ""
+
+    def subscribe(self, topic: Any, callback: Callable[[Any], object]) -> None:
+        self.subs[topic.key] = callback
+
+    def watch(self, key: str, callback: Callable[[str, bool], object]) -> None:
+        self.watched[key] = callback

@@ -7,7 +7,6 @@ from __future__ import annotations
 import re
 import subprocess
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
@@ -23,7 +22,7 @@ from common.transport import Bus
 from phenorover.eval.truth_view import TruthView, beside, served
 from services.viz.config import VizConfig
 from services.viz.outputs import live_recording_id, local_url
-from tests.conftest import Procs, free_port
+from tests.conftest import FakeBus, Procs, free_port
 from tests.viz import rrd
 
 
@@ -82,21 +81,6 @@ def test_the_truth_lands_in_the_recording_the_dashboard_serves(
     assert recordings(out) == {live_recording_id("test", viz.pid)}
     paths = rrd.entity_paths(out)
     assert {"/robot/estimate", "/robot/truth", "/robot/truth/body"} <= paths
-
-
-class FakeBus:
-    """Keeps each subscription's and liveliness watch's callback; nothing is sent."""
-
-    def __init__(self) -> None:
-        self.subs: dict[str, Callable[[Any], object]] = {}
-        self.watched: dict[str, Callable[[str, bool], object]] = {}
-        self.namespace = ""
-
-    def subscribe(self, topic: Any, callback: Callable[[Any], object]) -> None:
-        self.subs[topic.key] = callback
-
-    def watch(self, key: str, callback: Callable[[str, bool], object]) -> None:
-        self.watched[key] = callback
 
 
 def test_each_robots_truth_is_followed_into_a_restarted_dashboards_recording() -> None:

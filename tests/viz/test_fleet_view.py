@@ -3,8 +3,7 @@ namespace, the field drawn once."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, cast
+from typing import cast
 
 import pytest
 
@@ -16,16 +15,7 @@ from common.robot import default_robot
 from common.transport import Bus
 from services.viz.fleet_view import FleetView
 from services.viz.scene import Entry
-
-
-class FakeBus:
-    """Keeps each subscription's callback by key; nothing is sent."""
-
-    def __init__(self) -> None:
-        self.subs: dict[str, Callable[[Any], object]] = {}
-
-    def subscribe(self, topic: Any, callback: Callable[[Any], object]) -> None:
-        self.subs[topic.key] = callback
+from tests.conftest import FakeBus
 
 
 @pytest.fixture
