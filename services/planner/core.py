@@ -15,9 +15,11 @@ from common.arrays import F64
 from common.battery import Battery
 from common.field import Field, FieldLayout, ScannerModel, build_field
 from common.messages.core import Array
+from common.messages.nav import Leg
 from common.messages.plan import (
     Candidate,
     CoverSummary,
+    Fleet,
     PlanOptions,
     PlanResult,
     TourSummary,
@@ -107,12 +109,7 @@ def plan(
     shares = None
     if opt.robots > 1 or opt.home == "near":
         t = time.perf_counter()
-        # the lone robot a split is weighed against starts where its robots do
-        alone = survey.time_s
-        if opt.home == "near":
-            one = msgspec.structs.replace(opt, robots=1)
-            alone = fleet(nav, pts, ids, via, battery, one, alone).makespan_s
-        shares = fleet(nav, pts, ids, via, battery, opt, alone)
+        shares = _fleet(nav, pts, ids, via, battery, opt, survey.time_s)
         timings["fleet"] = time.perf_counter() - t
     return PlanResult(
         field=fld.name,
@@ -182,6 +179,21 @@ def _visibility(
             time_s=elapsed,
         ),
     )
+
+
+def _fleet(
+    nav: Navigator, pts: F64, ids: list[int | None], via: dict[int, list[Leg]],
+    battery: Battery, opt: PlanOptions, tour_s: float,
+) -> Fleet:  # fmt: skip
+    """The plan's robots' shares, weighed against one robot that starts where they do:
+    parked by the locations (``home`` ``near``), or the tour from the Origin
+    (``tour_s``)."""
+    if opt.home != "near":
+        return fleet(nav, pts, ids, via, battery, opt, tour_s)
+    lone = fleet(nav, pts, ids, via, battery, msgspec.structs.replace(opt, robots=1), tour_s)
+    if opt.robots == 1:  # a fleet of one is its own baseline: split once, not twice
+        return msgspec.structs.replace(lone, one_robot_s=lone.makespan_s)
+    return fleet(nav, pts, ids, via, battery, opt, lone.makespan_s)
 
 
 def _tour(
