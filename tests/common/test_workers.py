@@ -27,7 +27,10 @@ REPO = Path(__file__).resolve().parents[2]
 def _say_and_block(seconds: float) -> None:
     """A job that says it runs (its worker's pid, on stdout), then blocks until it is
     ended (or ``seconds`` pass)."""
-    print(os.getpid(), flush=True)
+    # one write: print() writes the number and the newline apart, and two workers
+    # sharing the pipe could interleave them ("123456\n", "\n")
+    sys.stdout.write(f"{os.getpid()}\n")
+    sys.stdout.flush()
     threading.Event().wait(seconds)
 
 
