@@ -17,8 +17,9 @@ into square ``cell`` cells for the canopy height model.
   ground plane);
 - ``volume_voxel``: occupied ``voxel``-metre cubes of canopy (heights counted from
   the ground, so voxels follow the terrain) times the cube's volume; a survey's
-  traits add the cubes hidden behind foliage inside the canopy's hull, which no ray
-  reached (``services/traits/hidden.py``; the simulator's truth knows every cube);
+  traits count the cubes hidden behind foliage inside the canopy's hull too, which no
+  ray reached, over the part of the plot seen from both lanes
+  (``services/traits/hidden.py``; the simulator's truth knows every cube);
 - ``volume_hull``: the convex hull of the canopy points (x, y, h);
 - ``points``: points in the footprint; ``seen``: the share of the slices holding a
   point (canopy or ground) in the outer third of the footprint on *both* sides of the
@@ -40,8 +41,11 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
+import numpy.typing as npt
 
-from common.arrays import F64
+from common.arrays import F64, I64
+
+B = npt.NDArray[np.bool_]
 
 # trait name -> unit, in the order the field book's columns list them
 TRAITS: dict[str, str] = {
@@ -90,7 +94,8 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
             "cover": "convex hull of the canopy in plan view, over the plot area",
             "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following "
             "(a survey: those holding a return, and those inside the canopy's hull that "
-            "no ray reached)",
+            f"no ray reached, over the {v:g} cm slices seen from both sides of the row, "
+            "per slice times the plot's slices)",
             "volume_hull": "convex hull of the canopy points",
             "points": "points inside the plot footprint",
             "seen": f"{c:g} cm slices with points on both sides of the row",
@@ -105,27 +110,40 @@ def footprint_cells(box: F64, cell: float) -> tuple[int, int]:
     )
 
 
+def row_axis(box: F64) -> int:
+    """The axis (0: x, 1: y) a footprint ``[xmin, ymin, xmax, ymax]``'s planted row
+    runs along: its long side."""
+    return 0 if (box[2] - box[0]) >= (box[3] - box[1]) else 1
+
+
+def both_sides(along: I64, across: F64, lo: float, hi: float, n: int) -> B:
+    """Which of ``n`` slices along a row hold a point in the outer third of the row's
+    width ``lo``..``hi`` on each side (seen from both lanes): points given by their
+    slice ``along`` and their coordinate ``across`` the row."""
+    third = (hi - lo) / 3
+    near = np.bincount(along[across < lo + third], minlength=n)[:n] > 0
+    far = np.bincount(along[across > hi - third], minlength=n)[:n] > 0
+    return near & far
+
+
 def plot_traits(
-    xy: F64, h: F64, box: F64, d: CanopyDefinition, hidden: int = 0
+    xy: F64, h: F64, box: F64, d: CanopyDefinition, voxels: float | None = None
 ) -> dict[str, float]:
     """The traits of one plot from points ``xy`` (N, 2) at heights ``h`` (N,) above the
-    ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]; ``hidden``: the
-    voxels a survey infers occupied behind foliage, beside those holding a point
-    (``services/traits/hidden.py``; none when every bit of the plants is known).
+    ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]; ``voxels``: the
+    plot's occupied voxels as a survey estimates them, in place of those holding a
+    point (``services/traits/hidden.py``; None when every bit of the plants is known).
     Heights and volumes are NaN when the plot holds no canopy point, and cover too
     when it holds no point at all."""
     nx, ny = footprint_cells(box, d.cell)
     ix = np.clip(((xy[:, 0] - box[0]) / d.cell).astype(np.int64), 0, nx - 1)
     iy = np.clip(((xy[:, 1] - box[1]) / d.cell).astype(np.int64), 0, ny - 1)
-    # the row runs along the footprint's long side
-    rows_x = (box[2] - box[0]) >= (box[3] - box[1])
-    along, ns = (ix, nx) if rows_x else (iy, ny)
-    across = xy[:, 1] if rows_x else xy[:, 0]
-    lo_c, hi_c = (box[1], box[3]) if rows_x else (box[0], box[2])
-    width, length = hi_c - lo_c, (box[3] - box[1] if not rows_x else box[2] - box[0])
-    near = np.bincount(along[across < lo_c + width / 3], minlength=ns) > 0
-    far = np.bincount(along[across > hi_c - width / 3], minlength=ns) > 0
-    out = {"points": float(len(h)), "seen": float((near & far).mean())}
+    axis = row_axis(box)
+    along, ns = (ix, nx) if axis == 0 else (iy, ny)
+    lo_c, hi_c = box[1 - axis], box[3 - axis]
+    width, length = hi_c - lo_c, box[2 + axis] - box[axis]
+    seen = both_sides(along, xy[:, 1 - axis], lo_c, hi_c, ns)
+    out = {"points": float(len(h)), "seen": float(seen.mean())}
     canopy = h >= d.min_height
     if not canopy.any():
         # nothing seen: cover unknown; seen, with no canopy: cover 0
@@ -144,7 +162,8 @@ def plot_traits(
     vy = np.floor((xy[canopy, 1] - box[1]) / d.voxel).astype(np.int64)
     span = 1 << 20  # voxels per axis (105 km at 10 cm); offsets keep keys non-negative
     keys = ((vx + span // 2) * span + (vy + span // 2)) * span + vz
-    out["volume_voxel"] = float((np.unique(keys).size + hidden) * d.voxel**3)
+    count = np.unique(keys).size if voxels is None else voxels
+    out["volume_voxel"] = float(count * d.voxel**3)
     out["volume_hull"] = _hull_volume(np.column_stack([xy[canopy], h[canopy]]), 3)
     return out
 

@@ -70,11 +70,11 @@ def record_scores(bench: Bench, seeds: Sequence[SeedScore]) -> None:
         "bias below); a scanner raised above the crop, or more scan locations along the "
         "lanes than the plan on the measured crop asks for",
         "cover": "scan locations that see each plot from both lanes",
-        "volume": "the hidden voxels are inferred, not seen: a voxel no ray reached "
-        "inside the canopy's hull counts as occupied, so plots seen from one side "
-        "(the nominal plan's) fill too much and a canopy's loose edges too little; more "
-        "scan locations along the lanes, or a share of the hidden voxels learnt from "
-        "the rays that did reach into the canopy",
+        "volume": "the voxels behind the surface are inferred, not seen: one a ray "
+        "crossed counts as empty though a loose edge may hold a leaf (plots seen well "
+        "fall short), one no ray reached inside the canopy's hull as occupied; more scan "
+        "locations along the lanes, or an occupancy learnt from the rays that did reach "
+        "into the canopy",
         "h2": "a smaller height error (the plot noise it adds lowers H2)",
     }
     for k, label in enumerate(DATE_LABELS):

@@ -27,7 +27,7 @@ from common.cropmodel import CropModel, assign_plots, crop_model
 from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
-from services.traits.hidden import hidden_voxels
+from services.traits.hidden import occupied_voxels
 from services.traits.run import Record, RunError, RunInput, load_run
 from services.traits.season import Offset
 
@@ -88,12 +88,13 @@ def trait_table(
     cfg: TraitsConfig,
     date: str,
     plot: I64 | None = None,
-    hidden: I64 | None = None,
+    voxels: F64 | None = None,
 ) -> TraitTable:
     """The :class:`TraitTable` of points ``xy`` (N, 2) at heights ``h`` above the
     ground over ``field``'s plots; ``plot``: each point's plot, when already found
-    (:func:`common.cropmodel.assign_plots`); ``hidden``: each plot's voxels hidden
-    behind foliage (:mod:`.hidden`; none without)."""
+    (:func:`common.cropmodel.assign_plots`); ``voxels``: each plot's occupied voxels
+    as the survey's rays estimate them (:mod:`.hidden`; without: those holding a
+    point)."""
     boxes = field.plot_boxes
     p = assign_plots(xy, boxes, field.plot_row, field.plot_col, 0.0) if plot is None else plot
     inside = np.flatnonzero(p >= 0)
@@ -104,7 +105,8 @@ def trait_table(
     for k in range(len(boxes)):
         idx = order[(ends[k - 1] if k else 0) : ends[k]]
         foot = boxes[k, [0, 1, 3, 4]]
-        t = plot_traits(xy[idx], h[idx], foot, cfg.definition, 0 if hidden is None else hidden[k])
+        count = None if voxels is None else float(voxels[k])
+        t = plot_traits(xy[idx], h[idx], foot, cfg.definition, count)
         quality.append(quality_of(t, cfg.min_seen))
         values[k] = [t[n] for n in NAMES]
     return TraitTable(records, values, quality, date, cfg.definition)
@@ -161,16 +163,16 @@ def compute_traits(
         h -= offset.at(xyz[:, 0], xyz[:, 1])
     fld = inp.field
     plot = assign_plots(xyz[:, :2], fld.plot_boxes, fld.plot_row, fld.plot_col, 0.0)
-    hidden = None
+    voxels = None
     views = inp.scan_views()
     if views is not None:
         # the walk's layers stand on the ground the heights do (an offset of
         # millimetres moves none of them)
-        hidden = hidden_voxels(xyz, h, plot, views, keep, fld, base, cfg.definition)
+        voxels = occupied_voxels(xyz, h, plot, views, keep, fld, base, cfg.definition)
         timings["hidden"] = time.perf_counter() - t
-        log.info("hidden voxels: %d in %d plots (%.1f s)", hidden.sum(), (hidden > 0).sum(),
-                 timings["hidden"])  # fmt: skip
-    table = trait_table(xyz[:, :2], h, fld, inp.records, cfg, inp.date, plot, hidden)
+        log.info("occupied voxels, hidden ones counted: %.0f in %d plots (%.1f s)",
+                 voxels.sum(), (voxels > 0).sum(), timings["hidden"])  # fmt: skip
+    table = trait_table(xyz[:, :2], h, fld, inp.records, cfg, inp.date, plot, voxels)
     crop = crop_model(
         xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date
     )

@@ -17,6 +17,14 @@ mapping (OctoMap's occupied, free and unknown):
   centre is within half a voxel of the hull (the voxel reaches into it: a canopy's
   edge seen from no scan, such as a plot's end, still fills the voxels it cuts).
 
+Where a plot was seen from one lane only, its far side is hidden up to the hull that
+the rest of the plot's canopy spans, whatever stands there. So the count is taken
+over the plot's slices seen from both lanes (``voxel`` long, across the row; seen as
+the ``seen`` trait sees it: a point in the outer third on each side) and carried to
+its whole length: the seen slices' mean times the plot's slices, the ratio estimate
+of a partly observed plot. A plot with no slice seen from both lanes (flagged
+``occluded``) keeps the count over all its slices.
+
 The rays are walked from each scan's scanner position to each point of it in steps
 of half a voxel (:func:`_walk`), compiled, on every core.
 """
@@ -30,7 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from common.arrays import F64, I64
-from common.canopy import CanopyDefinition, footprint_cells
+from common.canopy import CanopyDefinition, both_sides, footprint_cells, row_axis
 from common.cropmodel import plot_bands
 from common.field import Field
 from services.traits.ground import GroundModel
@@ -41,11 +49,11 @@ B = npt.NDArray[np.bool_]
 MAX_LAYERS = 100  # layers of voxels above the ground a canopy may fill (10 m at 10 cm)
 
 
-def hidden_voxels(
+def occupied_voxels(
     xyz: F64, h: F64, plot: I64, views: Views, keep: B, field: Field, ground: GroundModel,
     d: CanopyDefinition,
-) -> I64:  # fmt: skip
-    """Per plot, the hidden voxels inside its canopy's hull (see the module
+) -> F64:  # fmt: skip
+    """Per plot, its occupied voxels as the survey estimates them (see the module
     docstring): ``xyz`` (N, 3) the points (``keep`` of the run's cloud, whose
     ``views`` say where each was seen from), ``h`` their heights above the ground,
     ``plot`` the plot whose footprint holds each (-1 none)."""
@@ -63,42 +71,56 @@ def hidden_voxels(
         row_lo, col_lo, table, np.ascontiguousarray(boxes), dims, offset, layers, d.voxel,
         passed,
     )  # fmt: skip
-    order = np.flatnonzero(canopy & (plot >= 0))
-    order = order[np.argsort(plot[order], kind="stable")]
-    pts, ph = xyz[order, :2], h[order]
-    ends = np.cumsum(np.bincount(plot[order], minlength=len(boxes)))
-    out = np.zeros(len(boxes), dtype=np.int64)
+    inside = np.flatnonzero(plot >= 0)
+    inside = inside[np.argsort(plot[inside], kind="stable")]
+    ends = np.cumsum(np.bincount(plot[inside], minlength=len(boxes)))
+    out = np.zeros(len(boxes))
     for k in range(len(boxes)):
-        mine = slice(ends[k - 1] if k else 0, ends[k])
+        mine = inside[(ends[k - 1] if k else 0) : ends[k]]
         grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
-        out[k] = _hidden_in_hull(pts[mine], ph[mine], boxes[k], grid, d.voxel)
+        occupied = _occupied(xyz[mine, :2], h[mine], canopy[mine], boxes[k], grid, d.voxel)
+        out[k] = _over_seen_slices(occupied, xyz[mine, :2], boxes[k], d.voxel)
     return out
 
 
-def _hidden_in_hull(xy: F64, h: F64, box: F64, passed: B, v: float) -> int:
-    """Voxels of one plot's lattice (``passed``: (nx, ny, nz)) reaching into the hull
-    of its canopy points ``xy``, ``h`` (centre within half a voxel of it), neither
-    hit nor passed."""
+def _occupied(xy: F64, h: F64, canopy: B, box: F64, passed: B, v: float) -> B:
+    """One plot's occupied voxels (``passed``'s shape (nx, ny, nz)): those holding a
+    canopy point (``xy``, ``h`` where ``canopy``) and those neither hit nor passed
+    reaching into the hull of its canopy points (centre within half a voxel of it)."""
     from scipy.spatial import ConvexHull, QhullError
 
-    if len(h) < 4:
-        return 0
-    try:
-        hull = ConvexHull(np.column_stack([xy, h]))
-    except QhullError:  # flat or too few: no inside to hide anything
-        return 0
     nx, ny, nz = passed.shape
     hit = np.zeros_like(passed)
+    xy, h = xy[canopy], h[canopy]
     ix = np.clip(np.floor((xy[:, 0] - box[0]) / v).astype(np.int64), 0, nx - 1)
     iy = np.clip(np.floor((xy[:, 1] - box[1]) / v).astype(np.int64), 0, ny - 1)
     iz = np.clip(np.floor(h / v).astype(np.int64), 0, nz - 1)
     hit[ix, iy, iz] = True
+    if len(h) < 4:
+        return hit
+    try:
+        hull = ConvexHull(np.column_stack([xy, h]))
+    except QhullError:  # flat or too few: no inside to hide anything
+        return hit
     dark = np.argwhere(~hit & ~passed)
-    if len(dark) == 0:
-        return 0
     centre = (dark + 0.5) * v + np.array([box[0], box[1], 0.0])
     inside = np.all(centre @ hull.equations[:, :3].T + hull.equations[:, 3] <= 0.5 * v, axis=1)
-    return int(inside.sum())
+    hit[tuple(dark[inside].T)] = True
+    return hit
+
+
+def _over_seen_slices(occupied: B, xy: F64, box: F64, v: float) -> float:
+    """The occupied voxels of a plot's slices seen from both lanes (by its points
+    ``xy``, canopy and ground), times the plot's slices over those: the ratio estimate
+    over the whole plot; all its slices when none was seen from both."""
+    axis = row_axis(box)
+    n = occupied.shape[axis]
+    along = np.clip(np.floor((xy[:, axis] - box[axis]) / v).astype(np.int64), 0, n - 1)
+    seen = both_sides(along, xy[:, 1 - axis], box[1 - axis], box[3 - axis], n)
+    per_slice = occupied.sum(axis=(1, 2) if axis == 0 else (0, 2))
+    if not seen.any():
+        return float(per_slice.sum())
+    return float(per_slice[seen].sum() * n / seen.sum())
 
 
 @nb.njit(parallel=True, cache=True, error_model="numpy")

@@ -1,5 +1,6 @@
-"""Voxels hidden behind foliage: a solid canopy seen from one lane is counted whole,
-a gap seen through stays empty."""
+"""Voxels hidden behind foliage: a solid canopy seen from both lanes is counted whole,
+a gap seen through stays empty, and a plot seen from both lanes over part of its
+length is counted over that part, carried to its length."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from common.canopy import CanopyDefinition, plot_traits
 from common.cropmodel import assign_plots
 from common.field import load_field
 from services.traits.ground import GroundModel
-from services.traits.hidden import hidden_voxels
+from services.traits.hidden import _over_seen_slices, occupied_voxels
 from services.traits.run import Views
 from tests.traits.conftest import TINY
 
@@ -38,8 +39,8 @@ def _scan(origin: F64, blocks: list[F64], step_deg: float = 0.25) -> F64:
 
 
 def _volume(blocks: list[F64], origins: F64) -> tuple[float, float]:
-    """Plot 0's voxel volume from a scan at each of ``origins``: (hits only, with
-    hidden)."""
+    """Plot 0's voxel volume from a scan at each of ``origins``: (the voxels holding a
+    return, the survey's estimate)."""
     _, field = load_field(TINY)
     scans = [_scan(o, blocks) for o in origins]
     xyz = np.vstack(scans)
@@ -49,15 +50,15 @@ def _volume(blocks: list[F64], origins: F64) -> tuple[float, float]:
     )
     h = xyz[:, 2].copy()
     plot = assign_plots(xyz[:, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
-    hidden = hidden_voxels(
+    voxels = occupied_voxels(
         xyz, h, plot, Views(source, origins), np.ones(len(xyz), bool), field, ground, D
     )
     box = field.plot_boxes[0, [0, 1, 3, 4]]
     inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
     inside &= xyz[:, 1] < box[3]
     seen = plot_traits(xyz[inside, :2], h[inside], box, D)["volume_voxel"]
-    assert hidden[1:].sum() == 0  # nothing in the other plots
-    return seen, seen + hidden[0] * D.voxel**3
+    assert voxels[1:].sum() == 0  # nothing in the other plots
+    return seen, voxels[0] * D.voxel**3
 
 
 # the scanner 1 m high in the lanes on either side of plot 0 (x 2.25-5.25, y 1.4-2.4)
@@ -97,3 +98,43 @@ def test_a_gap_seen_through_stays_empty() -> None:
     _, whole = _volume(blocks, LANES)
     # the gap filled would add about a third
     assert abs(whole - truth) < 0.05 * truth
+
+
+def test_a_canopy_seen_from_both_lanes_over_part_of_its_length_is_counted_whole() -> None:
+    # a canopy taller than the scanners, and a wall in the far lane that hides most
+    # of its far side from the far scanner: the slices seen from both lanes, carried
+    # to the plot's length, give the whole
+    block = np.array([2.25, 1.63, 0.0, 5.25, 2.17, 1.33])
+    wall = np.array([0.0, 2.45, 0.0, 4.6, 2.5, 3.0])
+    origins = np.array([[3.75, 0.7, 1.0], [5.0, 2.8, 1.0]])
+    truth = _truth([block])
+    _, field = load_field(TINY)
+    scans = [_scan(o, [block, wall]) for o in origins]
+    xyz = np.vstack(scans)
+    box = field.plot_boxes[0, [0, 1, 3, 4]]
+    inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
+    inside &= xyz[:, 1] < box[3]
+    seen = plot_traits(xyz[inside, :2], xyz[inside, 2], box, D)["seen"]
+    assert 0.1 < seen < 0.6  # seen from both lanes over a part only
+    _, whole = _volume([block, wall], origins)
+    assert abs(whole - truth) < 0.05 * truth
+
+
+def test_the_seen_slices_mean_is_carried_to_the_plots_length() -> None:
+    # a plot 10 voxels long (x), 6 wide: slices 0-4 hold 3 voxels each, 5-9 hold 1;
+    # only slices 0-4 hold points on both sides
+    occupied = np.zeros((10, 6, 4), bool)
+    occupied[:5, 2:5, 0] = True
+    occupied[5:, 2, 0] = True
+    box = np.array([0.0, 0.0, 1.0, 0.6])
+    xs = np.arange(10) * 0.1 + 0.05
+    near = np.column_stack([xs, np.full(10, 0.05)])
+    far = np.column_stack([xs[:5], np.full(5, 0.55)])
+    xy = np.vstack([near, far])
+    assert _over_seen_slices(occupied, xy, box, 0.1) == 30.0  # 15 over 5 slices, x 10
+    # rows along y: the same plot turned a quarter
+    assert (
+        _over_seen_slices(occupied.transpose(1, 0, 2), xy[:, ::-1], box[[1, 0, 3, 2]], 0.1) == 30.0
+    )
+    # no slice seen from both lanes: every slice as counted
+    assert _over_seen_slices(occupied, near, box, 0.1) == 20.0
