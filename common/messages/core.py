@@ -33,6 +33,8 @@ NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=FINITE_MAX)]
 #: A finite float > 0.
 Positive = Annotated[float, msgspec.Meta(gt=0.0, le=FINITE_MAX)]
 Probability = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+#: A random generator's seed (numpy's take no negative one).
+Seed = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
 #: An angle in radians within two turns either way: every producer wraps to
 #: (-pi, pi]; the slack lets through one that wraps late, not garbage.
 Angle = Annotated[float, msgspec.Meta(ge=-4.0 * math.pi, le=4.0 * math.pi)]

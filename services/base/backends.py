@@ -21,6 +21,7 @@ from services.base.ros2.node import Ros2Node
 from services.base.ros2.types import BATTERY_STATE, CMD_VEL_TYPES, IMU, LASER_SCAN, ODOMETRY
 from services.base.ros2.wire import SENSOR_QOS
 from services.base.ros2_convert import (
+    Odom,
     battery_from_ros,
     decode_battery,
     decode_imu,
@@ -126,9 +127,13 @@ class Ros2Base:
 
         odoms = Refusals(bus, "ros2_odom_refused", "odometry from the ROS 2 base")
 
-        def odom(m: ros.Odometry) -> None:
+        def heard(o: Odom) -> None:
+            # heard only when it passes: a driver sending only refused odometry is gone
             self._watch.heard()
-            odoms.passed(odom_from_ros, m, lambda o: sinks.odom(*o))
+            sinks.odom(*o)
+
+        def odom(m: ros.Odometry) -> None:
+            odoms.passed(odom_from_ros, m, heard)
 
         def scan(m: ros.LaserScan) -> None:
             sinks.scan(scan_from_ros(m))

@@ -26,7 +26,8 @@ class BaseConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     stop at once, and its commands still in flight are void until a commander's token is
     back."""
     rate_hz: Annotated[float, msgspec.Meta(gt=0, le=200)] = 50.0
-    """Odometry and command rate."""
+    """How often the wheels are commanded and the base status published (Hz); odometry
+    goes out as the encoders or the driver send it."""
     var_v: NonNegative = 1e-4
     """The odometry's stated speed variance, (m/s)²."""
     var_w: NonNegative = 1e-4

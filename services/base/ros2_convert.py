@@ -8,7 +8,7 @@ import math
 import msgspec
 import numpy as np
 
-from common.messages.base import BatteryState, Imu, LaserScan
+from common.messages.base import BatteryState, Imu, LaserScan, Odometry
 from common.messages.core import Array
 from services.base.ros2 import msgs as ros
 
@@ -30,26 +30,43 @@ def decode_battery(data: bytes) -> ros.BatteryState:
 
 
 Odom = tuple[int, float, float, float, float, float]
+# the bus Odometry's fields in nav_msgs/Odometry
+_ODOM_FIELDS = {
+    "x": "pose.pose.position.x",
+    "y": "pose.pose.position.y",
+    "v": "twist.twist.linear.x",
+    "w": "twist.twist.angular.z",
+}
 
 
 def odom_from_ros(m: ros.Odometry) -> Odom:
     """(stamp ns, x, y, yaw, v, w) of a nav_msgs/Odometry, in the ``odom`` frame.
-    Raises ValueError naming the value when one is not finite (navigation would
-    integrate it into every pose after) or the orientation is no rotation."""
+    Raises ValueError naming the field when a value is not finite or is outside the
+    bus Odometry's bounds (navigation would integrate it into every pose after, and
+    every subscriber would refuse it on decode)."""
     p, t = m.pose.pose, m.twist.twist
-    q = p.orientation
-    values = {
-        "pose.position.x": p.position.x,
-        "pose.position.y": p.position.y,
-        "pose.orientation": math.fsum((q.x, q.y, q.z, q.w)),
-        "twist.linear.x": t.linear.x,
-        "twist.angular.z": t.angular.z,
+    fields = {
+        "x": p.position.x,
+        "y": p.position.y,
+        "yaw": _euler("pose.pose.orientation", p.orientation)[2],
+        "v": t.linear.x,
+        "w": t.angular.z,
     }
-    for name, v in values.items():
-        if not math.isfinite(v):
-            raise ValueError(f"odometry {name} is not finite")
-    yaw = ros.yaw_of(q)
-    return ros.ns_of_time(m.header.stamp), p.position.x, p.position.y, yaw, t.linear.x, t.angular.z
+    # the constructor does not check the schema's bounds (finite included): convert does
+    try:
+        o = msgspec.convert(fields, Odometry)
+    except msgspec.ValidationError as exc:  # "... - at `$.x`": named as the driver has it
+        at = str(exc).rpartition("`$.")[2].rstrip("`")
+        raise ValueError(f"odometry {_ODOM_FIELDS.get(at, at)}: {exc}") from None
+    return ros.ns_of_time(m.header.stamp), o.x, o.y, o.yaw, o.v, o.w
+
+
+def _euler(name: str, q: ros.Quaternion) -> tuple[float, float, float]:
+    """:func:`.ros2.msgs.euler_of`, its ValueError naming the field ``name``."""
+    try:
+        return ros.euler_of(q)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
 
 
 def imu_from_ros(m: ros.Imu) -> Imu:
@@ -60,12 +77,10 @@ def imu_from_ros(m: ros.Imu) -> Imu:
     level robot), or a value is not finite or is outside the bus message's bounds
     (which every subscriber would refuse on decode)."""
     q = m.orientation
-    if not all(math.isfinite(c) for c in (q.x, q.y, q.z, q.w)):
-        raise ValueError(f"orientation ({q.x}, {q.y}, {q.z}, {q.w}) is not finite")
     var_roll, var_pitch = (float(v) for v in np.asarray(m.orientation_covariance)[[0, 4]])
     if var_roll < 0.0:
         raise ValueError("orientation_covariance[0] < 0: the IMU states no orientation")
-    roll, pitch, yaw = ros.euler_of(q)
+    roll, pitch, yaw = _euler("orientation", q)
     tilt_var = 0.5 * (var_roll + max(var_pitch, 0.0))
     w, a = m.angular_velocity, m.linear_acceleration
     fields = {

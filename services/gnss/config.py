@@ -2,7 +2,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from common.messages.core import Positive
+from common.messages.core import Positive, Seed
+from common.messages.gnss import FixType
 from services.gnss.compass import CompassConfig
 from services.gnss.rtk_model import RtkModelConfig
 
@@ -40,10 +41,19 @@ class GnssConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     """The GNSS compass's check of the antennas' separation."""
     rtk: RtkModelConfig = msgspec.field(default_factory=RtkModelConfig)
     """The ``sim`` backend's RTK error model (docs/simulation.md)."""
-    seed: int = 1
+    seed: Seed = 1
     """The ``sim`` backend's noise seed."""
     fallback_sigma_m: dict[str, Positive] = msgspec.field(
         default_factory=lambda: {"FIX": 0.014, "FLOAT": 0.25, "DGPS": 0.5, "SINGLE": 1.2}
     )
     """The 1-sigma horizontal error assumed per fix type when a receiver sends no GST
-    sentence (m)."""
+    sentence (m), keyed by fix type (``FixType``'s names); a fix type left out is taken
+    at 10 m."""
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.fallback_sigma_m) - set(FixType.__members__))
+        if unknown:
+            raise ValueError(
+                f"fallback_sigma_m: {', '.join(unknown)} is no fix type "
+                f"({', '.join(FixType.__members__)})"
+            )

@@ -19,7 +19,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import Manifest
-from common.messages.core import NonNegative, Positive
+from common.messages.core import NonNegative, Positive, Seed
 from services.register.spheres import SphereConfig
 from services.register.targets import TargetConfig
 
@@ -106,14 +106,14 @@ class RegisterConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     """Sphere detection in every scan."""
     targets: TargetConfig = TargetConfig()
     """The target-based reference."""
-    sample_points: int = 5000
+    sample_points: Annotated[int, msgspec.Meta(ge=1, le=10_000_000)] = 5000
     """Each scan's uniform subsample for the scan point statistics."""
-    cloud_points: int = 20000
+    cloud_points: Annotated[int, msgspec.Meta(ge=1, le=10_000_000)] = 20000
     """Source points for the cloud-to-cloud distances."""
     overlap_radius: Annotated[float, msgspec.Meta(gt=0, le=1.0)] = 0.3
     """The overlap residuals' search radius of the scan point statistics (m): the paper's
     C2C searched 30 cm."""
-    seed: int = 0
+    seed: Seed = 0
     """The seed of the subsamples and of the spheres' RANSAC."""
 
 

@@ -22,7 +22,7 @@ class ScannerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     tty_baudrate: Annotated[int, msgspec.Meta(gt=0)] = 115_200
     """``slcan`` only: the serial line's baud rate."""
     storage_dir: str = "runs/scanner-card"
-    """Where the scanner's card is mounted: a scan is done only once its file is here."""
+    """Where the scanner's card is mounted: a scan's file is named here."""
     ack_timeout_s: Positive = 0.5
     """Each command waits this long for its ACK (wall time)."""
     retries: Annotated[int, msgspec.Meta(ge=0, le=10)] = 2

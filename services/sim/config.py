@@ -7,7 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError, load_manifest
-from common.messages.core import Finite, NonNegative, Positive, RobotName
+from common.messages.core import Coordinate, Finite, NonNegative, Positive, RobotName, Seed
 from services.sim.faults import Fault
 from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
@@ -21,7 +21,7 @@ class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
 
     namespace: RobotName
     """Its manifest's namespace: its devices are on that namespace's keys."""
-    start: tuple[Finite, Finite, Finite] | None = None
+    start: tuple[Coordinate, Coordinate, Finite] | None = None
     """Its start pose ``[x, y, yaw_deg]`` (m, deg); none: its home from
     :func:`common.lanes.homes` (edge lanes in turn from the Origin's cross lane), facing
     the field, where a plan with ``home = "origin"`` parks it."""
@@ -42,9 +42,9 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """The antennas' output rate."""
     lidar_hz: Hz = 10.0
     """The lidar's output rate."""
-    seed: int = 0
+    seed: Seed = 0
     """Noise seed (the world's shape has its own, ``world.seed``)."""
-    start: tuple[Finite, Finite, Finite] | None = None
+    start: tuple[Coordinate, Coordinate, Finite] | None = None
     """The robot's start pose ``[x, y, yaw_deg]`` in the field frame (m, deg); none: the
     field's origin corner, facing along +x."""
     world: WorldConfig = msgspec.field(default_factory=WorldConfig)

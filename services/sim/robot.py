@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from common.arrays import F64
 from common.geo import rot_zyx, wrap_angle
-from common.messages.core import Finite, NonNegative, Positive
+from common.messages.core import NonNegative, Positive
 from common.robot import Robot, default_robot
 from services.sim.terrain import Terrain
 
@@ -63,7 +63,7 @@ class RobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     lateral_noise: NonNegative = 0.01
     """White lateral velocity noise while moving or turning (m/s per m/s or rad/s), per
     unit soil."""
-    encoder_scale: Finite = 0.005
+    encoder_scale: Annotated[float, msgspec.Meta(gt=-0.5, lt=0.5)] = 0.005
     """The wheel encoders' relative scale error (the wheel radius on soil)."""
     encoder_v_std: NonNegative = 0.005
     """The encoders' white noise on the linear speed (m/s)."""

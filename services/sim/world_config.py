@@ -8,7 +8,7 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Finite, NonNegative, Positive
+from common.messages.core import Coordinate, NonNegative, Positive, Seed
 from services.sim import lidar as lidar_mod
 from services.sim.plant_config import FoliageConfig, TrialConfig
 from services.sim.render import FaroNoise
@@ -24,10 +24,10 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 
     count: Annotated[int, msgspec.Meta(ge=0, le=50)] = 5
     """How many spheres are placed when ``sites`` is none."""
-    sites: list[tuple[Finite, Finite, Finite]] | None = None
+    sites: list[tuple[Coordinate, Coordinate, NonNegative]] | None = None
     """Explicit ``[x, y, pole_height]`` per target in the ``field`` frame; none: ``count``
     sites are chosen for the scan locations."""
-    scan_sites: list[tuple[Finite, Finite]] | None = None
+    scan_sites: list[tuple[Coordinate, Coordinate]] | None = None
     """The scan locations (``[x, y]``) the sites are chosen for; none: the field's
     candidate scan locations."""
     radius: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.1
@@ -64,9 +64,9 @@ class TargetConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fie
 class BoxObstacle(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag="box"):
     """An axis-aligned box standing on the ground (m)."""
 
-    x: Finite
+    x: Coordinate
     """Its centre's x in the ``field`` frame."""
-    y: Finite
+    y: Coordinate
     """Its centre's y."""
     size_x: Positive
     """Its size along x."""
@@ -81,9 +81,9 @@ class CylinderObstacle(
 ):
     """A vertical cylinder standing on the ground (a person's leg, a post) (m)."""
 
-    x: Finite
+    x: Coordinate
     """Its axis' x in the ``field`` frame."""
-    y: Finite
+    y: Coordinate
     """Its axis' y."""
     radius: Positive
     """Its radius."""
@@ -98,13 +98,13 @@ class SoilZone(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=
     """A rectangle of the field frame (m) with a soil of its own (the paper's southern
     paths: loose rocks)."""
 
-    x_min: Finite
+    x_min: Coordinate
     """Its lower x."""
-    y_min: Finite
+    y_min: Coordinate
     """Its lower y."""
-    x_max: Finite
+    x_max: Coordinate
     """Its upper x."""
-    y_max: Finite
+    y_max: Coordinate
     """Its upper y."""
     soil: Soil
     """Its traction factor for wheel slip, as the world's ``soil``."""
@@ -114,7 +114,7 @@ class WorldConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """Everything that shapes the world. Where the robot's sensors sit is the robot
     description's, not the world's."""
 
-    seed: int = 0
+    seed: Seed = 0
     """Seeds terrain, plants and target heights (sensor noise takes the caller's
     generator)."""
     terrain: TerrainConfig = TerrainConfig()

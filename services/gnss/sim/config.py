@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from common.messages.core import NonNegative
+from common.messages.core import NonNegative, Seed
 from services.gnss.rtk_model import RtkModelConfig
 
 
@@ -55,7 +55,7 @@ class ReachSimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     rtk: RtkModelConfig = msgspec.field(default_factory=RtkModelConfig)
     """The RTK error model, as ``[services.gnss.rtk]`` (the same values and ``seed``
     give the same noise as the gnss ``sim`` backend)."""
-    seed: int = 1
+    seed: Seed = 1
     """The noise seed, as ``[services.gnss]``'s."""
     faults: ReachFaults = msgspec.field(default_factory=ReachFaults)
     """Faults of the wires, for tests."""
