@@ -41,11 +41,8 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
-import numpy.typing as npt
 
-from common.arrays import F64, I64
-
-B = npt.NDArray[np.bool_]
+from common.arrays import F64, I64, Bool
 
 # trait name -> unit, in the order the field book's columns list them
 TRAITS: dict[str, str] = {
@@ -76,8 +73,9 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
 
     cell: Cell = 0.05
     """Canopy height model cells and slices along the row."""
-    voxel: Cell = 0.1
-    """The occupancy volume's voxels."""
+    voxel: Annotated[float, msgspec.Meta(ge=0.05, le=1.0)] = 0.1
+    """The occupancy volume's voxels (a survey walks every ray through a lattice of
+    them up to 10 m above the ground: finer ones would fill the memory)."""
     min_height: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.05
     """Points lower than this above the ground are ground."""
     height_percentile: Annotated[float, msgspec.Meta(ge=50.0, le=100.0)] = 99.0
@@ -116,7 +114,7 @@ def row_axis(box: F64) -> int:
     return 0 if (box[2] - box[0]) >= (box[3] - box[1]) else 1
 
 
-def both_sides(along: I64, across: F64, lo: float, hi: float, n: int) -> B:
+def both_sides(along: I64, across: F64, lo: float, hi: float, n: int) -> Bool:
     """Which of ``n`` slices along a row hold a point in the outer third of the row's
     width ``lo``..``hi`` on each side (seen from both lanes): points given by their
     slice ``along`` and their coordinate ``across`` the row."""
@@ -131,8 +129,10 @@ def plot_traits(
 ) -> dict[str, float]:
     """The traits of one plot from points ``xy`` (N, 2) at heights ``h`` (N,) above the
     ground, all inside the footprint ``box`` [xmin, ymin, xmax, ymax]; ``voxels``: the
-    plot's occupied voxels as a survey estimates them, in place of those holding a
-    point (``services/traits/hidden.py``; None when every bit of the plants is known).
+    plot's occupied voxels as a survey's rays estimate them, in place of those holding
+    a point (``services/traits/hidden.py``; None: those holding a point, as for the
+    simulator's plants, whose every bit is known, or a survey without its scans'
+    positions).
     Heights and volumes are NaN when the plot holds no canopy point, and cover too
     when it holds no point at all."""
     nx, ny = footprint_cells(box, d.cell)
@@ -156,14 +156,15 @@ def plot_traits(
     out["height_p50"] = float(np.percentile(tops, 50.0))
     out["height_max"] = float(tops.max())
     out["cover"] = float(min(1.0, _hull_volume(xy[canopy], 2) / (width * length)))
-    # one int64 key per voxel: a 1-D unique is far faster than unique rows
-    vz = np.floor(h[canopy] / d.voxel).astype(np.int64)
-    vx = np.floor((xy[canopy, 0] - box[0]) / d.voxel).astype(np.int64)
-    vy = np.floor((xy[canopy, 1] - box[1]) / d.voxel).astype(np.int64)
-    span = 1 << 20  # voxels per axis (105 km at 10 cm); offsets keep keys non-negative
-    keys = ((vx + span // 2) * span + (vy + span // 2)) * span + vz
-    count = np.unique(keys).size if voxels is None else voxels
-    out["volume_voxel"] = float(count * d.voxel**3)
+    if voxels is None:
+        # one int64 key per voxel: a 1-D unique is far faster than unique rows
+        vz = np.floor(h[canopy] / d.voxel).astype(np.int64)
+        vx = np.floor((xy[canopy, 0] - box[0]) / d.voxel).astype(np.int64)
+        vy = np.floor((xy[canopy, 1] - box[1]) / d.voxel).astype(np.int64)
+        span = 1 << 20  # voxels per axis (105 km at 10 cm); offsets keep keys non-negative
+        keys = ((vx + span // 2) * span + (vy + span // 2)) * span + vz
+        voxels = np.unique(keys).size
+    out["volume_voxel"] = float(voxels * d.voxel**3)
     out["volume_hull"] = _hull_volume(np.column_stack([xy[canopy], h[canopy]]), 3)
     return out
 

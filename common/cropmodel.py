@@ -82,6 +82,16 @@ class CropModel(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
         return out
 
 
+def by_plot(plot: I64, n: int) -> tuple[I64, I64]:
+    """The points of each of ``n`` plots together, from each point's ``plot`` (-1
+    none): ``order`` (the points with a plot, by plot, in their order within one) and
+    ``starts`` (n + 1,): plot k's points are ``order[starts[k]:starts[k + 1]]``."""
+    inside = np.flatnonzero(plot >= 0)
+    order = inside[np.argsort(plot[inside], kind="stable")]
+    starts = np.concatenate([[0], np.cumsum(np.bincount(plot[inside], minlength=n))])
+    return order, starts.astype(np.int64)
+
+
 def assign_plots(xy: F64, boxes: F64, row: I64, col: I64, margin: float) -> I64:
     """The plot (index into ``boxes`` (P, >=5) [xmin, ymin, ..., xmax, ymax, ...]) of
     every point (N, 2): the one whose footprint holds it, else the nearest within
@@ -175,9 +185,8 @@ def crop_model(
     hi = np.full((n_plots, 2), -np.inf)
     np.minimum.at(lo, plot, xy)
     np.maximum.at(hi, plot, xy)
-    count = np.bincount(plot, minlength=n_plots)
-    order = np.argsort(plot, kind="stable")
-    starts = np.concatenate([[0], np.cumsum(count)])
+    order, starts = by_plot(plot, n_plots)
+    count = np.diff(starts)
     h_sorted = h[order]
     plots = []
     for p in range(n_plots):

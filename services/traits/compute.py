@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from common.arrays import F64, I64
 from common.canopy import TRAITS, CanopyDefinition, plot_traits
-from common.cropmodel import CropModel, assign_plots, crop_model
+from common.cropmodel import CropModel, assign_plots, by_plot, crop_model
 from common.field import Field, FieldLayout
 from services.traits.config import TraitsConfig
 from services.traits.ground import GroundError, GroundModel, fit_ground
@@ -87,23 +87,20 @@ def trait_table(
     records: list[Record],
     cfg: TraitsConfig,
     date: str,
-    plot: I64 | None = None,
+    groups: tuple[I64, I64],
     voxels: F64 | None = None,
 ) -> TraitTable:
     """The :class:`TraitTable` of points ``xy`` (N, 2) at heights ``h`` above the
-    ground over ``field``'s plots; ``plot``: each point's plot, when already found
-    (:func:`common.cropmodel.assign_plots`); ``voxels``: each plot's occupied voxels
-    as the survey's rays estimate them (:mod:`.hidden`; without: those holding a
+    ground over ``field``'s plots; ``groups``: each plot's points
+    (:func:`common.cropmodel.by_plot`); ``voxels``: each plot's occupied voxels as
+    the survey's rays estimate them (:mod:`.hidden`; without: those holding a
     point)."""
     boxes = field.plot_boxes
-    p = assign_plots(xy, boxes, field.plot_row, field.plot_col, 0.0) if plot is None else plot
-    inside = np.flatnonzero(p >= 0)
-    order = inside[np.argsort(p[inside], kind="stable")]
-    ends = np.cumsum(np.bincount(p[inside], minlength=len(boxes)))
+    order, starts = groups
     values = np.full((len(boxes), len(NAMES)), np.nan)
     quality: list[str] = []
     for k in range(len(boxes)):
-        idx = order[(ends[k - 1] if k else 0) : ends[k]]
+        idx = order[starts[k] : starts[k + 1]]
         foot = boxes[k, [0, 1, 3, 4]]
         count = None if voxels is None else float(voxels[k])
         t = plot_traits(xy[idx], h[idx], foot, cfg.definition, count)
@@ -163,16 +160,19 @@ def compute_traits(
         h -= offset.at(xyz[:, 0], xyz[:, 1])
     fld = inp.field
     plot = assign_plots(xyz[:, :2], fld.plot_boxes, fld.plot_row, fld.plot_col, 0.0)
+    groups = by_plot(plot, fld.n_plots)
     voxels = None
     views = inp.scan_views()
     if views is not None:
         # the walk's layers stand on the ground the heights do (an offset of
         # millimetres moves none of them)
-        voxels = occupied_voxels(xyz, h, plot, views, keep, fld, base, cfg.definition)
+        voxels = occupied_voxels(
+            xyz, h, groups, views, keep, fld, base, cfg.definition, cfg.min_seen
+        )
         timings["hidden"] = time.perf_counter() - t
         log.info("occupied voxels, hidden ones counted: %.0f in %d plots (%.1f s)",
                  voxels.sum(), (voxels > 0).sum(), timings["hidden"])  # fmt: skip
-    table = trait_table(xyz[:, :2], h, fld, inp.records, cfg, inp.date, plot, voxels)
+    table = trait_table(xyz[:, :2], h, fld, inp.records, cfg, inp.date, groups, voxels)
     crop = crop_model(
         xyz[:, :2], h, inp.field, inp.layout, min_height=cfg.definition.min_height, date=inp.date
     )

@@ -17,13 +17,15 @@ mapping (OctoMap's occupied, free and unknown):
   centre is within half a voxel of the hull (the voxel reaches into it: a canopy's
   edge seen from no scan, such as a plot's end, still fills the voxels it cuts).
 
-Where a plot was seen from one lane only, its far side is hidden up to the hull that
+Where a plot was seen from one lane only, its far side is dark up to the hull that
 the rest of the plot's canopy spans, whatever stands there. So the count is taken
-over the plot's slices seen from both lanes (``voxel`` long, across the row; seen as
-the ``seen`` trait sees it: a point in the outer third on each side) and carried to
-its whole length: the seen slices' mean times the plot's slices, the ratio estimate
-of a partly observed plot. A plot with no slice seen from both lanes (flagged
-``occluded``) keeps the count over all its slices.
+over the plot's slices seen from both lanes (slices one voxel long, across the row;
+seen by the ``seen`` trait's test, :func:`common.canopy.both_sides`: a point in the
+outer third on each side) and carried to its whole length: the seen slices' mean
+times the plot's slices, the ratio estimate of a partly observed plot. A plot seen
+so over less than ``min_seen`` of its slices (the traits' flag for one too occluded
+to trust) keeps the count over all its slices: a few slices carried to its length
+would say more than they hold. Never fewer voxels than hold a return.
 
 The rays are walked from each scan's scanner position to each point of it in steps
 of half a voxel (:func:`_walk`), compiled, on every core.
@@ -35,32 +37,30 @@ import math
 
 import numba as nb
 import numpy as np
-import numpy.typing as npt
 
-from common.arrays import F64, I64
+from common.arrays import F64, I64, Bool
 from common.canopy import CanopyDefinition, both_sides, footprint_cells, row_axis
 from common.cropmodel import plot_bands
 from common.field import Field
 from services.traits.ground import GroundModel
 from services.traits.run import Views
 
-B = npt.NDArray[np.bool_]
-
-MAX_LAYERS = 100  # layers of voxels above the ground a canopy may fill (10 m at 10 cm)
+MAX_HEIGHT_M = 10.0  # the highest a canopy is walked and counted above the ground
 
 
 def occupied_voxels(
-    xyz: F64, h: F64, plot: I64, views: Views, keep: B, field: Field, ground: GroundModel,
-    d: CanopyDefinition,
+    xyz: F64, h: F64, groups: tuple[I64, I64], views: Views, keep: Bool, field: Field,
+    ground: GroundModel, d: CanopyDefinition, min_seen: float,
 ) -> F64:  # fmt: skip
     """Per plot, its occupied voxels as the survey estimates them (see the module
     docstring): ``xyz`` (N, 3) the points (``keep`` of the run's cloud, whose
     ``views`` say where each was seen from), ``h`` their heights above the ground,
-    ``plot`` the plot whose footprint holds each (-1 none)."""
+    ``groups`` each plot's points (:func:`common.cropmodel.by_plot`)."""
     boxes = field.plot_boxes[:, [0, 1, 3, 4]]
     dims = np.array([footprint_cells(b, d.voxel) for b in boxes], dtype=np.int64)
     canopy = h >= d.min_height
-    layers = int(min(MAX_LAYERS, math.ceil(float(h[canopy].max(initial=0.0)) / d.voxel) + 1))
+    top = min(MAX_HEIGHT_M, float(h[canopy].max(initial=0.0)))
+    layers = math.ceil(top / d.voxel) + 1
     per_plot = dims[:, 0] * dims[:, 1] * layers
     offset = np.concatenate([[0], np.cumsum(per_plot)]).astype(np.int64)
     passed = np.zeros(int(offset[-1]), dtype=np.bool_)
@@ -71,22 +71,23 @@ def occupied_voxels(
         row_lo, col_lo, table, np.ascontiguousarray(boxes), dims, offset, layers, d.voxel,
         passed,
     )  # fmt: skip
-    inside = np.flatnonzero(plot >= 0)
-    inside = inside[np.argsort(plot[inside], kind="stable")]
-    ends = np.cumsum(np.bincount(plot[inside], minlength=len(boxes)))
+    order, starts = groups
+    xy, h, canopy = xyz[order, :2], h[order], canopy[order]
     out = np.zeros(len(boxes))
     for k in range(len(boxes)):
-        mine = inside[(ends[k - 1] if k else 0) : ends[k]]
+        mine = slice(starts[k], starts[k + 1])
         grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
-        occupied = _occupied(xyz[mine, :2], h[mine], canopy[mine], boxes[k], grid, d.voxel)
-        out[k] = _over_seen_slices(occupied, xyz[mine, :2], boxes[k], d.voxel)
+        hit, occupied = _occupied(xy[mine], h[mine], canopy[mine], boxes[k], grid, d.voxel)
+        counted = _over_seen_slices(occupied, xy[mine], boxes[k], d.voxel, min_seen)
+        out[k] = max(counted, float(hit.sum()))
     return out
 
 
-def _occupied(xy: F64, h: F64, canopy: B, box: F64, passed: B, v: float) -> B:
-    """One plot's occupied voxels (``passed``'s shape (nx, ny, nz)): those holding a
-    canopy point (``xy``, ``h`` where ``canopy``) and those neither hit nor passed
-    reaching into the hull of its canopy points (centre within half a voxel of it)."""
+def _occupied(xy: F64, h: F64, canopy: Bool, box: F64, passed: Bool, v: float) -> tuple[Bool, Bool]:
+    """One plot's voxels (``passed``'s shape (nx, ny, nz)) holding a canopy point
+    (``xy``, ``h`` where ``canopy``; heights above the lattice in its top layer), and
+    those with the ones neither hit nor passed reaching into the hull of its canopy
+    points (centre within half a voxel of it): (hit, occupied)."""
     from scipy.spatial import ConvexHull, QhullError
 
     nx, ny, nz = passed.shape
@@ -97,28 +98,30 @@ def _occupied(xy: F64, h: F64, canopy: B, box: F64, passed: B, v: float) -> B:
     iz = np.clip(np.floor(h / v).astype(np.int64), 0, nz - 1)
     hit[ix, iy, iz] = True
     if len(h) < 4:
-        return hit
+        return hit, hit
     try:
         hull = ConvexHull(np.column_stack([xy, h]))
     except QhullError:  # flat or too few: no inside to hide anything
-        return hit
+        return hit, hit
     dark = np.argwhere(~hit & ~passed)
     centre = (dark + 0.5) * v + np.array([box[0], box[1], 0.0])
     inside = np.all(centre @ hull.equations[:, :3].T + hull.equations[:, 3] <= 0.5 * v, axis=1)
-    hit[tuple(dark[inside].T)] = True
-    return hit
+    occupied = hit.copy()
+    occupied[tuple(dark[inside].T)] = True
+    return hit, occupied
 
 
-def _over_seen_slices(occupied: B, xy: F64, box: F64, v: float) -> float:
+def _over_seen_slices(occupied: Bool, xy: F64, box: F64, v: float, min_seen: float) -> float:
     """The occupied voxels of a plot's slices seen from both lanes (by its points
     ``xy``, canopy and ground), times the plot's slices over those: the ratio estimate
-    over the whole plot; all its slices when none was seen from both."""
+    over the whole plot; those of all its slices when under ``min_seen`` of them (or
+    none) were seen from both."""
     axis = row_axis(box)
     n = occupied.shape[axis]
     along = np.clip(np.floor((xy[:, axis] - box[axis]) / v).astype(np.int64), 0, n - 1)
     seen = both_sides(along, xy[:, 1 - axis], box[1 - axis], box[3 - axis], n)
     per_slice = occupied.sum(axis=(1, 2) if axis == 0 else (0, 2))
-    if not seen.any():
+    if not seen.any() or seen.mean() < min_seen:
         return float(per_slice.sum())
     return float(per_slice[seen].sum() * n / seen.sum())
 
@@ -127,7 +130,7 @@ def _over_seen_slices(occupied: B, xy: F64, box: F64, v: float) -> float:
 def _walk(
     pts: F64, source: I64, origins: F64, gz: F64, gx0: float, gy0: float, gcell: float,
     row_lo: F64, col_lo: F64, table: I64, boxes: F64, dims: I64, offset: I64,
-    layers: int, v: float, passed: B,
+    layers: int, v: float, passed: Bool,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """Mark in ``passed`` every voxel of a plot's lattice that a ray from
     ``origins[source[i]]`` to ``pts[i]`` crosses, up to half a voxel before the point.

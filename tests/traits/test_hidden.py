@@ -8,8 +8,9 @@ import numpy as np
 import numpy.typing as npt
 
 from common.canopy import CanopyDefinition, plot_traits
-from common.cropmodel import assign_plots
+from common.cropmodel import assign_plots, by_plot
 from common.field import load_field
+from services.traits.config import TraitsConfig
 from services.traits.ground import GroundModel
 from services.traits.hidden import _over_seen_slices, occupied_voxels
 from services.traits.run import Views
@@ -17,6 +18,7 @@ from tests.traits.conftest import TINY
 
 F64 = npt.NDArray[np.float64]
 D = CanopyDefinition()  # 10 cm voxels
+MIN_SEEN = TraitsConfig().min_seen  # 0.5
 
 
 def _scan(origin: F64, blocks: list[F64], step_deg: float = 0.25) -> F64:
@@ -50,8 +52,10 @@ def _volume(blocks: list[F64], origins: F64) -> tuple[float, float]:
     )
     h = xyz[:, 2].copy()
     plot = assign_plots(xyz[:, :2], field.plot_boxes, field.plot_row, field.plot_col, 0.0)
+    groups = by_plot(plot, field.n_plots)
+    keep = np.ones(len(xyz), bool)
     voxels = occupied_voxels(
-        xyz, h, plot, Views(source, origins), np.ones(len(xyz), bool), field, ground, D
+        xyz, h, groups, Views(source, origins), keep, field, ground, D, MIN_SEEN
     )
     box = field.plot_boxes[0, [0, 1, 3, 4]]
     inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
@@ -101,11 +105,11 @@ def test_a_gap_seen_through_stays_empty() -> None:
 
 
 def test_a_canopy_seen_from_both_lanes_over_part_of_its_length_is_counted_whole() -> None:
-    # a canopy taller than the scanners, and a wall in the far lane that hides most
+    # a canopy taller than the scanners, and a wall in the far lane that hides a third
     # of its far side from the far scanner: the slices seen from both lanes, carried
     # to the plot's length, give the whole
     block = np.array([2.25, 1.63, 0.0, 5.25, 2.17, 1.33])
-    wall = np.array([0.0, 2.45, 0.0, 4.6, 2.5, 3.0])
+    wall = np.array([0.0, 2.45, 0.0, 4.0, 2.5, 3.0])
     origins = np.array([[3.75, 0.7, 1.0], [5.0, 2.8, 1.0]])
     truth = _truth([block])
     _, field = load_field(TINY)
@@ -115,7 +119,7 @@ def test_a_canopy_seen_from_both_lanes_over_part_of_its_length_is_counted_whole(
     inside = (xyz[:, 0] >= box[0]) & (xyz[:, 0] < box[2]) & (xyz[:, 1] >= box[1])
     inside &= xyz[:, 1] < box[3]
     seen = plot_traits(xyz[inside, :2], xyz[inside, 2], box, D)["seen"]
-    assert 0.1 < seen < 0.6  # seen from both lanes over a part only
+    assert MIN_SEEN < seen < 0.9  # seen from both lanes over a part only
     _, whole = _volume([block, wall], origins)
     assert abs(whole - truth) < 0.05 * truth
 
@@ -131,10 +135,24 @@ def test_the_seen_slices_mean_is_carried_to_the_plots_length() -> None:
     near = np.column_stack([xs, np.full(10, 0.05)])
     far = np.column_stack([xs[:5], np.full(5, 0.55)])
     xy = np.vstack([near, far])
-    assert _over_seen_slices(occupied, xy, box, 0.1) == 30.0  # 15 over 5 slices, x 10
+    assert _over_seen_slices(occupied, xy, box, 0.1, MIN_SEEN) == 30.0  # 15 over 5 slices, x 10
     # rows along y: the same plot turned a quarter
     assert (
-        _over_seen_slices(occupied.transpose(1, 0, 2), xy[:, ::-1], box[[1, 0, 3, 2]], 0.1) == 30.0
+        _over_seen_slices(
+            occupied.transpose(1, 0, 2), xy[:, ::-1], box[[1, 0, 3, 2]], 0.1, MIN_SEEN
+        )
+        == 30.0
     )
     # no slice seen from both lanes: every slice as counted
-    assert _over_seen_slices(occupied, near, box, 0.1) == 20.0
+    assert _over_seen_slices(occupied, near, box, 0.1, MIN_SEEN) == 20.0
+
+
+def test_a_plot_seen_from_both_lanes_over_too_few_slices_keeps_every_slice() -> None:
+    # one slice of ten seen from both lanes, empty: carried to the plot's length it
+    # would say the plot is empty, though its other slices hold returns
+    occupied = np.zeros((10, 6, 4), bool)
+    occupied[1:, 2, 0] = True
+    box = np.array([0.0, 0.0, 1.0, 0.6])
+    xy = np.array([[0.05, 0.05], [0.05, 0.55]])
+    assert _over_seen_slices(occupied, xy, box, 0.1, 0.0) == 0.0  # no minimum: carried
+    assert _over_seen_slices(occupied, xy, box, 0.1, MIN_SEEN) == 9.0
