@@ -120,9 +120,11 @@ def serve(launch: Launch[C], build: Callable[[Context, C], Service], lockstep: L
         launch.manifest_path,
         inbox if lockstep == "world" else None,
     )
-    bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text))
+    # constant answers, so never held for a step: the mission asks every service's
+    # configuration (its own too) from within a handler that holds its step
+    bus.serve(keys.PING.at(service=name), lambda p: Pong(service=name, text=p.text), stepped=False)
     resolved = ServiceConfig(service=name, machine=launch.machine, toml=dump_toml(launch.cfg))
-    bus.serve(keys.CONFIG.at(service=name), lambda _: resolved)
+    bus.serve(keys.CONFIG.at(service=name), lambda _: resolved, stepped=False)
     health = threading.Thread(
         target=_heartbeat, args=(bus, name, launch.machine, since_ns, stop), daemon=True
     )

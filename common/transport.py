@@ -160,18 +160,18 @@ class Bus:
         self.subscribe(topic, holder.put)
         return holder
 
-    def serve(self, rpc: Rpc[Q, R], handler: Callable[[Q], R]) -> None:
-        """Answer queries on ``rpc.key`` with ``handler(request)``.
+    def serve(self, rpc: Rpc[Q, R], handler: Callable[[Q], R], stepped: bool = True) -> None:
+        """Answer queries on ``rpc.key`` with ``handler(request)``; in lockstep between
+        steps, unless not ``stepped`` (an answer no step changes: asked mid-step too).
 
         A request that fails to decode, or a handler raising RequestError, gets an
         error reply with a one-line reason; other exceptions are logged and answered
-        as internal errors. The service keeps serving either way.
-        """
+        as internal errors. The service keeps serving either way."""
         rpc = rpc.within(self.namespace)
 
         def work(query: zenoh.Query) -> None:
             serving = None
-            if self._clock is not None:
+            if self._clock is not None and stepped:
                 tag = query.attachment
                 serving = self._clock.serving(caller_time(tag.to_bytes() if tag else None))
             answer(query, rpc, handler, self.name, self._dropped, self._failed, serving)

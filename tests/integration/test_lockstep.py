@@ -122,6 +122,9 @@ def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path
     assert all(c > 0 for c in use.cpu_s.values()), use
     assert len(steps) == 3 and all(s[6] == "done" for s in steps), steps
     assert events[-1][2] == "mission M done"
+    # every service's configuration, the mission's own too (asked mid-step)
+    saved = (first / "config.toml").read_text()
+    assert all(f"[services.{n}]" in saved for n in use.cpu_s), saved
     with busy_cores():
         loaded = what_happened(survey(manifest(tmp_path, 1000.0)))
     paced = what_happened(survey(manifest(tmp_path, 4.0)))
