@@ -39,13 +39,20 @@ def free_port() -> int:
     return free_loopback_port()
 
 
+@contextlib.contextmanager
+def router() -> Iterator[str]:
+    """A Zenoh router on a free loopback port, hosted by the test process: its
+    endpoint."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(zenoh_config("router", [ep], [])):
+        yield ep
+
+
 @pytest.fixture
 def router_endpoint() -> Iterator[str]:
-    """A Zenoh router on a free loopback port, hosted by the test process."""
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    session = zenoh.open(zenoh_config("router", [ep], []))
-    yield ep
-    session.close()
+    """A Zenoh router for the test (:func:`router`)."""
+    with router() as ep:
+        yield ep
 
 
 @contextlib.contextmanager

@@ -32,8 +32,11 @@ def test_a_callback_caught_by_close_is_not_counted_as_a_failure(router_endpoint:
     try:
         with client(router_endpoint, "sender") as sender:
             pub = sender.publisher(keys.HEALTH.at(service="sender"))
-            while not started.wait(0.05):  # until the subscription is matched
+            for _ in range(400):  # until the subscription is matched, 20 s at most
                 pub.put(Health(service="sender", machine="m", pid=1, uptime_s=0.0))
+                if started.wait(0.05):
+                    break
+            assert started.is_set(), "the subscription never matched"
         bus.close()
         go.set()
         assert done.wait(10.0)

@@ -14,14 +14,12 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 from typing import IO
 
 import pytest
 
 from common.workers import Worker, WorkerError, starmap
-
-REPO = Path(__file__).resolve().parents[2]
+from tests.conftest import REPO
 
 
 def _say_and_block(seconds: float) -> None:

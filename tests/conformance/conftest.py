@@ -18,13 +18,11 @@ from pathlib import Path
 from typing import Protocol
 
 import pytest
-import zenoh
 
 from common.clock import WallClock
-from common.config import zenoh_config
 from common.service import Context
 from common.transport import Bus
-from tests.conftest import client, free_port
+from tests.conftest import client, router
 
 
 class Runs(Protocol):
@@ -35,8 +33,7 @@ class Runs(Protocol):
 def router_endpoint() -> Iterator[str]:
     """One Zenoh router for the suites (opening one takes half a second); every test
     still opens sessions of its own and closes them."""
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    with zenoh.open(zenoh_config("router", [ep], [])):
+    with router() as ep:
         yield ep
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
 
 import msgspec
 import pytest
@@ -12,8 +11,7 @@ from phenorover.eval import profiles
 from services.mission.config import MissionConfig
 from services.nav.config import NavConfig
 from services.register.config import RegisterRunConfig
-
-REPO = Path(__file__).resolve().parents[2]
+from tests.conftest import REPO
 
 
 def test_the_paper_profile_is_a_valid_nav_config_over_the_shipped_manifest() -> None:
