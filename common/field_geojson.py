@@ -34,6 +34,7 @@ from common.field_model import (
     Field,
     FieldError,
     FieldLayout,
+    FieldSettings,
 )
 from common.geo import FieldFrame
 
@@ -182,7 +183,7 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
     olat, olon, _ = frame.field_to_wgs84(shift[0], shift[1])
     try:
         layout = FieldLayout(
-            name=s.name,
+            **{k: getattr(s, k) for k in FieldSettings.__struct_fields__},
             rows=nrows,
             plots_per_row=ncols,
             plot_length=length,
@@ -192,19 +193,10 @@ def field_from_geojson(data: bytes, source: str) -> tuple[FieldLayout, Field]:
             alley_width=_gap(boxes, 0, 3, col, ncols),
             headland_width=s.headland_width,
             edge_width=s.edge_width,
-            voxel_x=s.voxel_x,
-            voxel_y=s.voxel_y,
-            voxel_z=s.voxel_z,
-            min_scan_distance=s.min_scan_distance,
-            robot_half_length=s.robot_half_length,
-            robot_half_width=s.robot_half_width,
             origin_lat=float(olat),
             origin_lon=float(olon),
-            origin_alt=s.origin_alt,
             row_bearing_deg=float(bearing),
-            start_corner=s.start_corner,
             field_book=book,
-            planting_date=s.planting_date,
         )
         # the constructor does not validate; a round trip through msgspec does
         layout = msgspec.convert(msgspec.to_builtins(layout), FieldLayout)

@@ -23,7 +23,7 @@ Pos = Annotated[float, msgspec.Meta(gt=0, le=MAX_LENGTH_M)]
 NonNeg = Annotated[float, msgspec.Meta(ge=0, le=MAX_LENGTH_M)]
 Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]  # m above the ellipsoid
 # Bounds that keep a field description from asking for absurd memory before anything
-# can check it (a 10,000-row field used to end in a 17.9 GiB allocation): the largest
+# can check it (a 10,000-row field would end in a 17.9 GiB allocation): the largest
 # breeding trials have a few thousand plots, and the planner states its own, smaller
 # budget (services/planner/budget.py) on top of these.
 MAX_ROWS = 1_000  # rows, and plots per row
@@ -83,15 +83,44 @@ def default_half_width() -> float:
     return default_robot().footprint.width / 2
 
 
-class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+class FieldSettings(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """What a field description says beside its plots, the same in a TOML field
+    (:class:`FieldLayout`) and a GeoJSON one
+    (:class:`common.field_geosettings.GeoSettings`)."""
+
+    name: str = "field"
+    """The field's name."""
+    voxel_x: Voxel = 0.5
+    """The cells' size along x (m); the paper's cell is 0.5 x 0.5 x 0.33 m."""
+    voxel_y: Voxel = 0.5
+    """The cells' size along y (m)."""
+    voxel_z: Voxel = 0.33
+    """The cells' size up (m)."""
+    min_scan_distance: NonNeg = 0.6
+    """The scanner's least horizontal distance to any plot at a candidate (m; the FARO's
+    minimum range)."""
+    robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
+    """Half the length of the footprint that must fit at a candidate (m); by default half
+    the shipped robot description's ``[footprint]`` (the Husky A200's)."""
+    robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
+    """Half the width of the footprint that must fit at a candidate (m); by default half
+    the shipped robot description's ``[footprint]``."""
+    origin_alt: Altitude = 0.0
+    """Height of the field frame's origin above the WGS84 ellipsoid (m)."""
+    start_corner: Corner = "bottom-right"
+    """Where tours start and end; ``bottom-right`` is the paper's Origin."""
+    planting_date: datetime.date | None = None
+    """The day the trial was sown (TOML local date ``2026-05-01``): the simulator grows a
+    trial to a survey date from it, the traits count days after it."""
+
+
+class FieldLayout(FieldSettings, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A regular plot-based breeding field, as a breeder describes it (metres, degrees).
     A lane intersection is a candidate scan location when the scanner is at least
     ``min_scan_distance`` (horizontally) from every plot and the robot footprint
     (``robot_half_length`` x ``robot_half_width``) fits there facing along one of the
     two lanes."""
 
-    name: str = "field"
-    """The field's name."""
     rows: PosInt
     """Rows of plots (the grid's y)."""
     plots_per_row: PosInt
@@ -110,33 +139,14 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     """The free strip beyond both row ends (m)."""
     edge_width: Pos | None = None
     """The free strip beyond the two outer rows (m); none: ``headland_width``."""
-    voxel_x: Voxel = 0.5
-    """The cells' size along x (m); the paper's cell is 0.5 x 0.5 x 0.33 m."""
-    voxel_y: Voxel = 0.5
-    """The cells' size along y (m)."""
-    voxel_z: Voxel = 0.33
-    """The cells' size up (m)."""
-    min_scan_distance: NonNeg = 0.6
-    """The scanner's least horizontal distance to any plot at a candidate (m; the FARO's
-    minimum range)."""
-    robot_half_length: NonNeg = msgspec.field(default_factory=default_half_length)
-    """Half the length of the footprint that must fit at a candidate (m); by default half
-    the shipped robot description's ``[footprint]`` (the Husky A200's)."""
-    robot_half_width: NonNeg = msgspec.field(default_factory=default_half_width)
-    """Half the width of the footprint that must fit at a candidate (m); by default half
-    the shipped robot description's ``[footprint]``."""
     origin_lat: Annotated[float, msgspec.Meta(ge=-90, le=90)] | None = None
     """WGS84 latitude of the field frame's origin (deg); without ``origin_lat`` and
     ``origin_lon`` the field has no georeference (docs/configuration.md)."""
     origin_lon: Annotated[float, msgspec.Meta(ge=-180, le=180)] | None = None
     """WGS84 longitude of the field frame's origin (deg)."""
-    origin_alt: Altitude = 0.0
-    """Height of the field frame's origin above the WGS84 ellipsoid (m)."""
     row_bearing_deg: Annotated[float, msgspec.Meta(ge=-360, le=360)] = 0.0
     """Bearing of the field frame's +x axis (along the rows), degrees clockwise from
     north."""
-    start_corner: Corner = "bottom-right"
-    """Where tours start and end; ``bottom-right`` is the paper's Origin."""
     targets: tuple[Site, ...] = ()
     """The registration spheres as the surveyor set them out, ``[x, y, pole_height]`` each
     (field frame, m); the simulator stands its spheres there."""
@@ -145,9 +155,6 @@ class FieldLayout(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     path of a CSV file relative to the field file's folder, which
     :func:`common.field.load_field` replaces by its records (:mod:`common.fieldbook`);
     empty: no book, plots numbered from 1 in plot order."""
-    planting_date: datetime.date | None = None
-    """The day the trial was sown (TOML local date ``2026-05-01``): the simulator grows a
-    trial to a survey date from it, the traits count days after it."""
 
     @property
     def georeferenced(self) -> bool:
