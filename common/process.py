@@ -1,5 +1,5 @@
 """Process helpers a service may need: a free port for a private deployment, and
-children that die with their parent."""
+children that die with their parent or are stopped."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import ctypes
 import re
 import signal
 import socket
+import subprocess
 
 _PR_SET_PDEATHSIG = 1
 
@@ -25,6 +26,19 @@ def die_with_parent() -> None:
     leaves no orphans (Linux prctl PR_SET_PDEATHSIG)."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def stop_process(proc: subprocess.Popen[bytes], grace_s: float) -> None:
+    """SIGTERM to a child still running, and SIGKILL when it has not exited within
+    ``grace_s`` seconds; returns once it has."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")

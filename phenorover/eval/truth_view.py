@@ -37,7 +37,7 @@ from common import keys
 from common.client import DEFAULT_MANIFEST, add_connection_arguments, connect_or_explain
 from common.config import ConfigError, Manifest, decode_section, load_manifest
 from common.messages.sim import TruthPose
-from common.process import die_with_parent
+from common.process import die_with_parent, stop_process
 from common.robot import Robot, load_robot
 from common.service_args import setup_logging
 from common.status import parse_token
@@ -168,12 +168,7 @@ def beside(manifest_path: Path, manifest: Manifest) -> Iterator[subprocess.Popen
     try:
         yield proc
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop_process(proc, 5.0)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -203,9 +198,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     bus = Bus(session, "truth_view", namespace=manifest.namespace)
     view = TruthView(bus, cfg, robot, manifest.machine, manifest.clock == "sim")
+    period = 1.0 / cfg.rate_hz
     try:
-        while not stop.wait(1.0 / cfg.rate_hz):
-            view.tick()
+        while not stop.is_set():
+            if view.wait_news(period):  # at most rate_hz ticks, none without news
+                view.tick()
+                stop.wait(period)
     finally:
         view.close()
         bus.close()

@@ -32,7 +32,7 @@ from urllib.parse import quote
 
 import rerun as rr
 
-from common.process import die_with_parent, strip_ansi
+from common.process import die_with_parent, stop_process, strip_ansi
 from services.viz.config import VizConfig
 from services.viz.scene import Entry, blueprint
 
@@ -157,13 +157,7 @@ class WebViewer:
 
     def close(self) -> None:
         """Stop the viewer's process (it holds no data)."""
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=1.0)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc, 1.0)
 
 
 def save_path(template: str, run_dir: Path, mission: str) -> Path:
