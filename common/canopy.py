@@ -91,9 +91,9 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
             "height_max": f"max of the canopy height model ({c:g} cm cells)",
             "cover": "convex hull of the canopy in plan view, over the plot area",
             "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following "
-            "(a survey: those holding a return, and those inside the canopy's hull that "
-            f"no ray reached, over the {v:g} cm slices seen from both sides of the row, "
-            "per slice times the plot's slices)",
+            "(a survey with its scans' positions: those holding a return, and those "
+            f"inside the canopy's hull that no ray reached, over the {v:g} cm slices seen "
+            "from both sides of the row, per slice times the plot's slices)",
             "volume_hull": "convex hull of the canopy points",
             "points": "points inside the plot footprint",
             "seen": f"{c:g} cm slices with points on both sides of the row",

@@ -189,11 +189,10 @@ def common_name(cert: x509.Certificate) -> str:
     return str(attrs[0].value) if attrs else ""
 
 
-def _write(path: Path, data: bytes, mode: int, force: bool) -> None:
-    """``data`` to ``path`` with ``mode``, whole or not at all: a replaced key
-    (``force``) stays the old one until the new one is complete."""
-    if path.exists() and not force:
-        raise CertError(f"{path} exists (use --force to replace it)")
+def _write(path: Path, data: bytes, mode: int) -> None:
+    """``data`` to ``path`` with ``mode``, whole or not at all: a replaced key stays the
+    old one until the new one is complete (whether to replace is
+    :func:`_refuse_existing`'s)."""
     try:
         with atomic_path(path) as tmp:
             # created with its mode: a key is never readable by others, not for a moment
@@ -222,8 +221,8 @@ def init_ca(folder: Path = DEFAULT_DIR, force: bool = False, days: int = 3650) -
     except OSError as exc:
         raise CertError(f"{folder}: cannot create: {exc.strerror}") from None
     key, cert = make_ca(days=days)
-    _write(key_path, key_pem(key), 0o600, force)
-    _write(cert_path, cert_pem(cert), 0o644, force)
+    _write(key_path, key_pem(key), 0o600)
+    _write(cert_path, cert_pem(cert), 0o644)
     return [cert_path, key_path]
 
 
@@ -244,8 +243,8 @@ def issue_files(
     cert_path, key_path = folder / f"{machine}.pem", folder / f"{machine}.key"
     _refuse_existing([cert_path, key_path], force)
     key, cert = issue(ca_key, ca_cert, machine, hosts or [], days=days)
-    _write(key_path, key_pem(key), 0o600, force)
-    _write(cert_path, cert_pem(cert), 0o644, force)
+    _write(key_path, key_pem(key), 0o600)
+    _write(cert_path, cert_pem(cert), 0o644)
     return [cert_path, key_path]
 
 

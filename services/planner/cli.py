@@ -236,10 +236,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def _by_nav(req: PlanRequest, result: PlanResult) -> dict[str, float]:
     """The paper's comparison of navigation modes for ``result`` (empty on a field
-    this machine cannot read, planned remotely)."""
-    from services.planner.compare import lengths_by_nav
+    this machine cannot read, planned remotely, or too large to compare)."""
+    from services.planner.compare import comparable, lengths_by_nav
     from services.planner.request import resolve_field
 
+    if not comparable(result):
+        return {}  # before building the field again
     try:
         return lengths_by_nav(resolve_field(req)[1], result)
     except FieldError:

@@ -17,12 +17,18 @@ from services.planner.tsp import circuit_cpsat
 MAX_NODES = 14
 
 
+def comparable(result: PlanResult) -> bool:
+    """Whether the comparison is made for ``result``: at most ``MAX_NODES`` locations
+    with the Origin."""
+    return len(result.selected) + 1 <= MAX_NODES
+
+
 def lengths_by_nav(fld: Field, result: PlanResult) -> dict[str, float]:
     """The optimal tour length (m) over ``result``'s locations and the Origin under
     each navigation mode, with the plan's open lanes (the plan's own mode: its tour);
     a mode whose optimum is not proven within the plan's tour time limit is left out,
     and all are beyond ``MAX_NODES``."""
-    if len(result.selected) + 1 > MAX_NODES:
+    if not comparable(result):
         return {}
     index = {int(c): k for k, c in enumerate(fld.cand_ids)}
     pts = np.vstack([fld.origin_xy[None, :], fld.cand_xy[[index[c] for c in result.selected]]])
