@@ -112,18 +112,24 @@ def add_job_arguments(p: argparse.ArgumentParser, name: str, figures: str) -> No
 
 
 def resolve_config(
-    name: str, config_type: type[C], args: argparse.Namespace
+    name: str,
+    config_type: type[C],
+    manifest_path: str | Path | None,
+    config: Path | None,
+    overrides: Sequence[str],
 ) -> tuple[C, Manifest | None]:
-    manifest = load_manifest(args.manifest) if args.manifest else None
+    """``name``'s options: its manifest section (or the ``config`` file instead), with
+    ``key=value`` ``overrides`` applied; and the manifest. Raises ConfigError."""
+    manifest = load_manifest(manifest_path) if manifest_path else None
     section: dict[str, Any] = {}
     where = name
     if manifest is not None:
         section = manifest.services.get(name, {})
-        where = f"{args.manifest}: [services.{name}]"
-    if args.config is not None:
-        section = read_toml(args.config)
-        where = str(args.config)
-    section = apply_overrides(section, args.set)
+        where = f"{manifest_path}: [services.{name}]"
+    if config is not None:
+        section = read_toml(config)
+        where = str(config)
+    section = apply_overrides(section, list(overrides))
     return decode_section(section, config_type, where), manifest
 
 
@@ -136,8 +142,7 @@ def resolve_job(
     overrides = [*args.set, *extra]
     if args.figures is not None:
         overrides.append(f"figures={str(args.figures).lower()}")
-    ns = argparse.Namespace(manifest=args.manifest, config=args.config, set=overrides)
-    return resolve_config(name, config_type, ns)
+    return resolve_config(name, config_type, args.manifest, args.config, overrides)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -174,7 +179,7 @@ def parse(
     try:
         if options is not None:
             args.set = [*args.set, *options.overrides(args)]
-        cfg, manifest = resolve_config(name, config_type, args)
+        cfg, manifest = resolve_config(name, config_type, args.manifest, args.config, args.set)
         # read before anything starts: a bad description is one line, not a traceback
         robot = load_robot(args.robot or (manifest.robot if manifest else ""))
     except ConfigError as exc:
