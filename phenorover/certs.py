@@ -60,6 +60,22 @@ def check_machine(name: str) -> None:
         )
 
 
+def _usage(ca: bool) -> x509.KeyUsage:
+    """A CA's key signs certificates and CRLs only; a machine's signs its TLS
+    handshakes only (ECDHE: no key encipherment)."""
+    return x509.KeyUsage(
+        digital_signature=not ca,
+        content_commitment=False,
+        key_encipherment=False,
+        data_encipherment=False,
+        key_agreement=False,
+        key_cert_sign=ca,
+        crl_sign=ca,
+        encipher_only=False,
+        decipher_only=False,
+    )
+
+
 def make_ca(name: str = CA_NAME, days: int = 3650) -> tuple[Key, x509.Certificate]:
     """A new self-signed CA key and certificate (may sign machine certificates only)."""
     key = ec.generate_private_key(ec.SECP256R1())
@@ -74,20 +90,7 @@ def make_ca(name: str = CA_NAME, days: int = 3650) -> tuple[Key, x509.Certificat
         .not_valid_before(start)
         .not_valid_after(end)
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(
-            x509.KeyUsage(
-                digital_signature=False,
-                content_commitment=False,
-                key_encipherment=False,
-                data_encipherment=False,
-                key_agreement=False,
-                key_cert_sign=True,
-                crl_sign=True,
-                encipher_only=False,
-                decipher_only=False,
-            ),
-            critical=True,
-        )
+        .add_extension(_usage(ca=True), critical=True)
         .add_extension(ski, critical=False)
         .sign(key, hashes.SHA256())
     )
@@ -123,20 +126,7 @@ def issue(
         .not_valid_before(start)
         .not_valid_after(min(end, ca_cert.not_valid_after_utc))
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-        .add_extension(
-            x509.KeyUsage(
-                digital_signature=True,
-                content_commitment=False,
-                key_encipherment=False,
-                data_encipherment=False,
-                key_agreement=False,
-                key_cert_sign=False,
-                crl_sign=False,
-                encipher_only=False,
-                decipher_only=False,
-            ),
-            critical=True,
-        )
+        .add_extension(_usage(ca=False), critical=True)
         .add_extension(
             x509.ExtendedKeyUsage(
                 [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
