@@ -91,7 +91,13 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
 
     ``arrival_tolerance_m``: the route has arrived only when the estimate is this close
     to its end; else it fails (a scan must never be taken where the robot merely
-    stopped). Its sender knows what its goal needs, so the route carries it."""
+    stopped). Its sender knows what its goal needs, so the route carries it.
+
+    ``fine``: the route ends at a scan location, so it ends with fine positioning and
+    arrives only at its planned heading. A route that leads nowhere a scan is taken
+    (the way back to the Origin, to a battery swap) sends ``fine=False``: it ends
+    where its last leg does, within ``arrival_tolerance_m``, at any heading; time
+    spent there on centimetres would buy nothing."""
 
     route_id: str
     legs: list[Leg]
@@ -99,6 +105,7 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
     join: bool = False
     arrival_tolerance_m: ArrivalTolerance = ARRIVAL_TOLERANCE_M
+    fine: bool = True
 
 
 class CancelRoute(msgspec.Struct, frozen=True, tag=True):

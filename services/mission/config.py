@@ -113,8 +113,10 @@ class MissionConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     mission log)."""
     swapped_at: Annotated[float, msgspec.Meta(gt=0, le=1)] = 0.9
     """The charge, as a fraction of full, that ends a wait for a swap."""
-    origin_radius_m: Positive = 2.0
-    """How near the Origin the robot is there (for a swap)."""
+    origin_radius_m: ArrivalTolerance = 2.0
+    """How near the Origin the robot is there: for a swap, and the arrival tolerance of
+    the routes there (home, to a swap), which skip fine positioning (no scan is taken
+    at the Origin)."""
     pace: Pace = msgspec.field(default_factory=Pace)
     """The speed along routes and the time at a location the plan's time and its battery
     swaps are estimated with."""

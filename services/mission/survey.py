@@ -175,13 +175,19 @@ class Survey:
         return False, why
 
     def _send(self, seg: Segment, rid: str) -> int:
-        """Send the route; the clock time it was sent at."""
+        """Send the route; the clock time it was sent at. A route to a scan location
+        must arrive within ``arrival_tolerance_m`` after fine positioning; one to the
+        Origin (home, a swap: no location) within ``origin_radius_m``, without it."""
+        to_scan = seg.cand_id is not None
         route = FollowRoute(
             route_id=rid,
             legs=seg.legs,
             lease_s=self.cfg.lease_s,
             join=True,
-            arrival_tolerance_m=self.cfg.arrival_tolerance_m,
+            arrival_tolerance_m=self.cfg.arrival_tolerance_m
+            if to_scan
+            else self.cfg.origin_radius_m,
+            fine=to_scan,
         )
         sent = self.now()
         rep: NavReply = self.call(keys.NAV_CMD, route)

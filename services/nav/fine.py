@@ -3,8 +3,9 @@
 The robot stands ``fine_settle_s``, longer while the estimate's position SD is above
 ``fine_settle_sd_m`` (at most ``fine_settle_max_s``: the filter averages GNSS while
 the wheels are still), then creeps along its heading to within ``fine_tolerance_m``
-of the goal, re-checking ``fine_resettle_s`` after each move. Creep speeds are low
-enough that the drivetrain's lag overshoots by well under the tolerances.
+of the goal, re-checking ``fine_resettle_s`` after each move. A creep slows as it
+nears the goal and ends at ``creep_speed``, low enough that the drivetrain's lag
+overshoots by well under the tolerances.
 
 Only where the route plans a heading at its end does the robot then turn slowly to
 within ``fine_heading_tolerance_deg`` of it, or of the estimate's own heading SD if
@@ -26,6 +27,10 @@ import numpy as np
 import numpy.typing as npt
 
 from services.nav.follower_config import FollowerConfig
+
+# a creep along the leg goes at its remaining distance over this (s), within
+# creep_speed..creep_max_speed: it slows to creep_speed over its last centimetres
+CREEP_S = 1.0
 
 
 def pose_sds(cov: npt.NDArray[np.float64]) -> tuple[float, float]:
@@ -114,7 +119,13 @@ class Fine:
         if self._creep is not None:
             kind, sign = self._creep
             err = rem if kind == "v" else -(yaw_err or 0.0)
-            rate = c.creep_speed if kind == "v" else c.creep_turn_rate
+            # a creep slows as it nears the goal (its distance per second), so it
+            # ends at creep_speed however far it began
+            rate = (
+                min(c.creep_max_speed, max(c.creep_speed, abs(err) / CREEP_S))
+                if kind == "v"
+                else c.creep_turn_rate
+            )
             # aim at the goal itself, stopping early by what is still in the pipeline
             if sign * err > rate * c.creep_latency_s:
                 return (sign * rate, 0.0) if kind == "v" else (0.0, sign * rate)

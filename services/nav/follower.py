@@ -47,6 +47,7 @@ class Follower:
         self.lease_until = math.inf
         self._join = False
         self.arrival_tolerance_m = ARRIVAL_TOLERANCE_M
+        self.to_scan = True  # the route ends at a scan location (FollowRoute.fine)
         self.end_detail = ""  # how the last route ended (arrival or failure), for progress
 
     def start(
@@ -57,15 +58,18 @@ class Follower:
         lease_until: float = math.inf,
         join: bool = False,
         arrival_tolerance_m: float = ARRIVAL_TOLERANCE_M,
+        to_scan: bool = True,
     ) -> None:
         """Follow ``legs`` until ``lease_until`` (seconds, the clock of :meth:`step`)
         unless renewed; with ``join``, start on the first leg passing within
         ``join_distance_m`` of the robot, decided at the first localized step (a
         restarted navigation is not localized yet when the route is sent again). It
-        has arrived only within ``arrival_tolerance_m`` of its end (the route's own)."""
+        has arrived only within ``arrival_tolerance_m`` of its end (the route's own);
+        ``to_scan``: it ends at a scan location (``FollowRoute.fine``)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
         self.lease_until, self._join = lease_until, join
         self.arrival_tolerance_m, self.end_detail = arrival_tolerance_m, ""
+        self.to_scan = to_scan
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
         self.fine = Fine(self.cfg)
@@ -205,7 +209,7 @@ class Follower:
         leg, cfg = k.leg, self.cfg
         last = self.leg + 1 == len(self.legs)
         if along_remaining(k.x, k.y, leg.x0, leg.y0, leg.x1, leg.y1) <= cfg.goal_tolerance_m:
-            self.phase = Phase.FINE if last and cfg.fine else Phase.FINAL
+            self.phase = Phase.FINE if last and cfg.fine and self.to_scan else Phase.FINAL
             self.fine.begin(k.t)
             return None
         if k.obstacle:
@@ -288,12 +292,12 @@ class Follower:
 
     def _arrive(self, k: Tick, yaw_err: float) -> Command:
         """ARRIVED when the estimate is within the arrival tolerances of the route's
-        end, FAILED (saying how far off) otherwise."""
+        end (a route not to a scan: its distance only), FAILED (saying how far off)
+        otherwise."""
         leg = self.legs[-1]
         off = math.hypot(leg.x1 - k.x, leg.y1 - k.y)
         what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"
-        if off <= self.arrival_tolerance_m and abs(yaw_err) <= math.radians(
-            self.cfg.arrival_heading_tolerance_deg
-        ):
+        heading_ok = abs(yaw_err) <= math.radians(self.cfg.arrival_heading_tolerance_deg)
+        if off <= self.arrival_tolerance_m and (heading_ok or not self.to_scan):
             return self._out(k, 0.0, 0.0, NavState.ARRIVED, "arrived", f"{what} by the estimate")
         return self._out(k, 0.0, 0.0, NavState.FAILED, "failed", f"stopped {what}")

@@ -88,7 +88,12 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     fine_settle_max_s: Positive = 10.0
     """The longest the settle on arrival waits for ``fine_settle_sd_m``."""
     creep_speed: Positive = 0.03
-    """The speed of a creep along the leg (m/s)."""
+    """The slowest creep along the leg (m/s): each creep ends at it."""
+    creep_max_speed: Positive = 0.1
+    """The fastest creep (m/s). A creep goes at its remaining distance per second,
+    between ``creep_speed`` and this: a long one (the estimate moved while the robot
+    came in) takes seconds, not tens of them, and each still ends as slowly, so it
+    overshoots no more."""
     creep_turn_rate: Positive = 0.02
     """The turn rate of a heading trim (rad/s)."""
     creep_latency_s: Positive = 0.2
@@ -105,9 +110,11 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     """The speed of a re-approach (m/s)."""
     reapproaches: Annotated[int, msgspec.Meta(ge=0)] = 2
     """At most this many re-approaches."""
-    reapproach_tolerance_m: Positive = 0.03
+    reapproach_tolerance_m: Positive = 0.04
     """At the route's end, a sideways offset from the leg beyond this is re-approached
-    (m)."""
+    (m). With ``fine_tolerance_m`` along the leg it keeps the stop inside the mission's
+    5 cm arrival check (2 and 4 cm make 4.5 cm); a re-approach costs about 20 s, and
+    visibility tolerates stops far further off (``FollowerConfig``)."""
     arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     """Arrival is declared only within this angle of the route's planned heading (and
     within the route's own distance, ``FollowRoute.arrival_tolerance_m``, the mission's

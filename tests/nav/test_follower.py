@@ -88,15 +88,24 @@ def test_no_motion_while_not_localized() -> None:
 
 
 def run_lagging(
-    f: Follower, x: float, y: float, yaw: float, seconds: float = 300.0, heading_sd: float = 0.0
+    f: Follower,
+    x: float,
+    y: float,
+    yaw: float,
+    seconds: float = 300.0,
+    heading_sd: float = 0.0,
+    at: list[float] | None = None,
 ) -> tuple[float, float, float, list[str]]:
     """Close the loop around a unicycle whose wheels follow commands with a 0.15 s
-    lag (which overshoots a plain stop by centimetres), until an event."""
+    lag (which overshoots a plain stop by centimetres), until an event (its time
+    appended to ``at``)."""
     v = w = 0.0
     dt, tau = 0.05, 0.15
     for k in range(int(seconds / dt)):
         c = f.step(k * dt, x, y, yaw, True, False, heading_sd=heading_sd)
         if c.event:
+            if at is not None:
+                at.append(k * dt)
             return x, y, yaw, [c.event]
         v += (c.v - v) * (1 - math.exp(-dt / tau))
         w += (c.w - w) * (1 - math.exp(-dt / tau))
@@ -132,12 +141,12 @@ def test_the_place_along_the_leg_is_fine_tuned_before_turning_to_another_heading
 
 
 def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
-    """Stopped 4 cm beside the goal (a skid-steer robot cannot creep sideways), the
+    """Stopped 5 cm beside the goal (a skid-steer robot cannot creep sideways), the
     robot backs up along the leg and comes in again, ending within the tolerances."""
     cfg = FollowerConfig()
     f = Follower(cfg)
     f.start("side", [Leg(x0=0, y0=0, x1=2, y1=0)])
-    x, y, yaw, events = run_lagging(f, 1.99, 0.04, 0.0)
+    x, y, yaw, events = run_lagging(f, 1.99, 0.05, 0.0)
     assert events == ["arrived"]
     assert abs(y) <= cfg.reapproach_tolerance_m and abs(x - 2.0) <= cfg.fine_tolerance_m
     # a scan location plans no heading: the one the robot came in with is kept
@@ -145,7 +154,7 @@ def test_a_sideways_offset_at_the_goal_is_driven_out_by_backing_up() -> None:
     assert "trim" not in f.end_detail, f.end_detail
     assert f.fine.reapproaches >= 1
     # the arrival says what the fine phase did
-    assert re.search(r"re-approach [+-]40 mm aside", f.end_detail), f.end_detail
+    assert re.search(r"re-approach [+-]50 mm aside", f.end_detail), f.end_detail
     assert "the last settle" in f.end_detail
 
 
