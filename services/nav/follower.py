@@ -23,6 +23,7 @@ from services.nav.pursuit import (
     curvature,
     lookahead_point,
     predict,
+    ramp,
     segment_distance,
 )
 
@@ -64,12 +65,11 @@ class Follower:
         unless renewed; with ``join``, start on the first leg passing within
         ``join_distance_m`` of the robot, decided at the first localized step (a
         restarted navigation is not localized yet when the route is sent again). It
-        has arrived only within ``arrival_tolerance_m`` of its end (the route's own);
+        has arrived only within ``arrival_tolerance_m`` of its end (the route's own).
         ``to_scan``: it ends at a scan location (``FollowRoute.fine``)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
         self.lease_until, self._join = lease_until, join
-        self.arrival_tolerance_m, self.end_detail = arrival_tolerance_m, ""
-        self.to_scan = to_scan
+        self.arrival_tolerance_m, self.end_detail, self.to_scan = arrival_tolerance_m, "", to_scan
         self.phase = Phase.ALIGN
         self.state = NavState.DRIVING if legs else NavState.ARRIVED
         self.fine = Fine(self.cfg)
@@ -106,15 +106,12 @@ class Follower:
             NavState.NOT_LOCALIZED,
         )
 
-    def _ramp(self, target: float, current: float, rate: float, dt: float) -> float:
-        return current + max(-rate * dt, min(rate * dt, target - current))
-
     def _rotate(self, err: float, dt: float) -> float:
         """The turn rate toward a heading ``err`` rad away (see FollowerConfig)."""
         c = self.cfg
         brake = math.sqrt(2.0 * c.turn_braking * c.max_turn_accel * abs(err))
         w = max(c.min_turn_rate, min(c.max_turn_rate, c.rotate_gain * abs(err), brake))
-        return self._ramp(math.copysign(w, err), self._w, c.max_turn_accel, dt)
+        return ramp(math.copysign(w, err), self._w, c.max_turn_accel, dt)
 
     def _remaining(self, x: float, y: float) -> float:
         leg = self.legs[self.leg]
@@ -229,7 +226,7 @@ class Follower:
         ahead = along_remaining(qx, qy, leg.x0, leg.y0, leg.x1, leg.y1)
         v_stop = math.sqrt(2.0 * cfg.max_accel * 0.5 * max(0.0, ahead))
         v = min(self.speed_limit, max(cfg.min_speed, v_stop))
-        v = self._ramp(v, self._v, cfg.max_accel, k.dt)
+        v = ramp(v, self._v, cfg.max_accel, k.dt)
         w = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, v * c))
         # coming in again after backing up is part of the fine positioning
         coming_in = self.fine.reapproaches > 0
@@ -291,9 +288,8 @@ class Follower:
         return self._arrive(k, wrap_angle(k.yaw - yaw_goal) if leg.length > 0 else 0.0)
 
     def _arrive(self, k: Tick, yaw_err: float) -> Command:
-        """ARRIVED when the estimate is within the arrival tolerances of the route's
-        end (a route not to a scan: its distance only), FAILED (saying how far off)
-        otherwise."""
+        """ARRIVED when the estimate is within the route's arrival tolerances (a route
+        not to a scan: its distance only), else FAILED, saying how far off."""
         leg = self.legs[-1]
         off = math.hypot(leg.x1 - k.x, leg.y1 - k.y)
         what = f"{1000 * off:.1f} mm and {math.degrees(yaw_err):+.2f} deg off the planned pose"

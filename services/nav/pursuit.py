@@ -83,6 +83,12 @@ def predict(
     return x + v * t * math.cos(mid), y + v * t * math.sin(mid), yaw + w * t
 
 
+def ramp(target: float, current: float, rate: float, dt: float) -> float:
+    """``current`` moved toward ``target`` by at most ``rate`` per second over ``dt``:
+    a command within the drivetrain's acceleration."""
+    return current + max(-rate * dt, min(rate * dt, target - current))
+
+
 def aim_at(x: float, y: float, leg: Leg, lookahead: float) -> float:
     """The heading to turn to before driving ``leg``: toward its look-ahead point, so
     a robot that a corner's turn in place shifted sideways heads back to the line from
