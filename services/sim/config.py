@@ -78,10 +78,11 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     touched."""
     nice: Annotated[int, msgspec.Meta(ge=0, le=19)] = 10
     """How far the simulator yields the CPU to the services it feeds (a Unix nice
-    increment, 0: not at all). On a machine too busy for ``real_time_factor`` the world
-    then slows down, as the services are not able to in the field: at the same priority
-    it would keep its pace and the services fall seconds of sim time behind their own
-    sensors, for good (a backlog a saturated machine never drains)."""
+    increment, 0: not at all), when it runs free. On a machine too busy for
+    ``real_time_factor`` the world then slows down, as the services are not able to in
+    the field: at the same priority it would keep its pace and the services fall
+    seconds of sim time behind their own sensors, for good (a backlog a saturated
+    machine never drains). In lockstep it is not lowered: each step waits for it."""
     start_held: bool = False
     """In lockstep (the manifest's ``lockstep``), the world stands at its start until
     asked to run (``rpc/sim/run``): whoever starts a survey or an experiment does so

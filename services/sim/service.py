@@ -277,7 +277,9 @@ class SimService:
 
 
 def build(ctx: Context, cfg: SimConfig) -> SimService:
-    if cfg.nice:
+    # in lockstep (an inbox) every step waits for the world and the world for every
+    # step: a lowered simulator would only hold each step up, never yield to anyone
+    if cfg.nice and ctx.inbox is None:
         try:
             os.nice(cfg.nice)
         except OSError as exc:  # not allowed here: the world keeps the services' pace
