@@ -93,9 +93,9 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
     to its end; else it fails (a scan must never be taken where the robot merely
     stopped). Its sender knows what its goal needs, so the route carries it.
 
-    ``fine``: the route ends at a scan location, so it ends with fine positioning and
-    arrives only at its planned heading. A route that leads nowhere a scan is taken
-    (the way back to the Origin, to a battery swap) sends ``fine=False``: it ends
+    ``to_scan``: the route ends at a scan location, so it ends with fine positioning
+    and arrives only at its planned heading. A route that leads nowhere a scan is taken
+    (the way back to the Origin, to a battery swap) sends ``to_scan=False``: it ends
     where its last leg does, within ``arrival_tolerance_m``, at any heading; time
     spent there on centimetres would buy nothing."""
 
@@ -105,7 +105,7 @@ class FollowRoute(msgspec.Struct, frozen=True, tag=True):
     lease_s: Annotated[float, msgspec.Meta(gt=0, le=3600.0)] = 2.0
     join: bool = False
     arrival_tolerance_m: ArrivalTolerance = ARRIVAL_TOLERANCE_M
-    fine: bool = True
+    to_scan: bool = True
 
 
 class CancelRoute(msgspec.Struct, frozen=True, tag=True):

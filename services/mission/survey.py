@@ -187,7 +187,7 @@ class Survey:
             arrival_tolerance_m=self.cfg.arrival_tolerance_m
             if to_scan
             else self.cfg.origin_radius_m,
-            fine=to_scan,
+            to_scan=to_scan,
         )
         sent = self.now()
         rep: NavReply = self.call(keys.NAV_CMD, route)

@@ -48,7 +48,7 @@ class Follower:
         self.lease_until = math.inf
         self._join = False
         self.arrival_tolerance_m = ARRIVAL_TOLERANCE_M
-        self.to_scan = True  # the route ends at a scan location (FollowRoute.fine)
+        self.to_scan = True  # the route ends at a scan location (FollowRoute.to_scan)
         self.end_detail = ""  # how the last route ended (arrival or failure), for progress
 
     def start(
@@ -66,7 +66,7 @@ class Follower:
         ``join_distance_m`` of the robot, decided at the first localized step (a
         restarted navigation is not localized yet when the route is sent again). It
         has arrived only within ``arrival_tolerance_m`` of its end (the route's own).
-        ``to_scan``: it ends at a scan location (``FollowRoute.fine``)."""
+        ``to_scan``: it ends at a scan location (``FollowRoute.to_scan``)."""
         self.route_id, self.legs, self.leg = route_id, list(legs), 0
         self.lease_until, self._join = lease_until, join
         self.arrival_tolerance_m, self.end_detail, self.to_scan = arrival_tolerance_m, "", to_scan

@@ -39,7 +39,7 @@ class Routes:
                         self.log.warning("route %s refused: %s", rid, why)
                         return NavReply(stamp_ns=now, accepted=False, reason=why)
                     self.follower.start(
-                        rid, legs, vmax, t + lease, cmd.join, cmd.arrival_tolerance_m, cmd.fine
+                        rid, legs, vmax, t + lease, cmd.join, cmd.arrival_tolerance_m, cmd.to_scan
                     )
                     self.log.info(
                         "route %s: %d legs, from leg %d", rid, len(legs), self.follower.leg
