@@ -68,6 +68,11 @@ def column(trait: str) -> str:
 Cell = Annotated[float, msgspec.Meta(ge=0.005, le=1.0)]
 
 
+# the highest a survey walks its rays and counts voxels above the ground (m): the
+# lattice's memory, for the finest voxel allowed
+MAX_HEIGHT_M = 10.0
+
+
 class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """The definitions' parameters (metres; a percentile in 0-100)."""
 
@@ -75,7 +80,7 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
     """Canopy height model cells and slices along the row."""
     voxel: Annotated[float, msgspec.Meta(ge=0.05, le=1.0)] = 0.1
     """The occupancy volume's voxels (a survey walks every ray through a lattice of
-    them up to 10 m above the ground: finer ones would fill the memory)."""
+    them up to ``MAX_HEIGHT_M`` above the ground: finer ones would fill the memory)."""
     min_height: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.05
     """Points lower than this above the ground are ground."""
     height_percentile: Annotated[float, msgspec.Meta(ge=50.0, le=100.0)] = 99.0
@@ -93,7 +98,8 @@ class CanopyDefinition(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown
             "volume_voxel": f"occupied {v:g} cm voxels of canopy, terrain-following "
             "(a survey with its scans' positions: those holding a return, and those "
             f"inside the canopy's hull that no ray reached, over the {v:g} cm slices seen "
-            "from both sides of the row, per slice times the plot's slices)",
+            "from both sides of the row, per slice times the plot's slices; over all "
+            "slices when fewer than min_seen of them were seen so)",
             "volume_hull": "convex hull of the canopy points",
             "points": "points inside the plot footprint",
             "seen": f"{c:g} cm slices with points on both sides of the row",

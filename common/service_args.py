@@ -91,7 +91,7 @@ def parser(name: str) -> argparse.ArgumentParser:
 
 def add_job_arguments(p: argparse.ArgumentParser, name: str, figures: str) -> None:
     """The flags by which a job (``[services.<name>]``, run on demand) takes its
-    options: ``--manifest``, ``--config``, ``--set`` (read by :func:`resolve_config`)
+    options: ``--manifest``, ``--config``, ``--set`` (read by :func:`resolve_job`)
     and ``--figures/--no-figures`` (``figures`` says what it writes)."""
     p.add_argument(
         "--manifest", type=Path, default=None, help=f"deploy manifest; uses [services.{name}]"

@@ -25,9 +25,7 @@ holding the run folder and the scans.
 
 from __future__ import annotations
 
-import os
 import shutil
-import signal
 import subprocess
 import sys
 import threading
@@ -42,6 +40,7 @@ from common.messages.mission import (
     MissionPhase,
     MissionState,
 )
+from common.process import stop_process
 from common.transport import Bus
 
 # the modules run as programs, in this order (never imported here)
@@ -144,15 +143,8 @@ class RegistrationJob:
         further step starts."""
         with self._lock:
             self._stopping.set()
-        p = self._proc
-        if p is None or p.poll() is not None:
-            return
-        p.send_signal(signal.SIGTERM)
-        try:
-            p.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            os.kill(p.pid, signal.SIGKILL)
-            p.wait()
+        if self._proc is not None:
+            stop_process(self._proc, timeout)
 
 
 def start_registration(

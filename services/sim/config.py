@@ -7,7 +7,7 @@ from typing import Annotated
 import msgspec
 
 from common.config import ConfigError, load_manifest
-from common.messages.core import Coordinate, Finite, NonNegative, Positive, RobotName, Seed
+from common.messages.core import Coordinate, NonNegative, Positive, RobotName, Seed
 from services.sim.faults import Fault
 from services.sim.imu import ImuConfig
 from services.sim.render import ScanSettings
@@ -15,13 +15,16 @@ from services.sim.world_config import WorldConfig
 
 Hz = Annotated[float, msgspec.Meta(gt=0, le=1000)]
 
+# a start pose's yaw (deg): two turns either way, as a hand-written start might give
+YawDeg = Annotated[float, msgspec.Meta(ge=-720.0, le=720.0)]
+
 
 class SimRobotConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """One robot of a shared world (:mod:`services.sim.robots`, docs/fleet.md)."""
 
     namespace: RobotName
     """Its manifest's namespace: its devices are on that namespace's keys."""
-    start: tuple[Coordinate, Coordinate, Finite] | None = None
+    start: tuple[Coordinate, Coordinate, YawDeg] | None = None
     """Its start pose ``[x, y, yaw_deg]`` (m, deg); none: its home from
     :func:`common.lanes.homes` (edge lanes in turn from the Origin's cross lane), facing
     the field, where a plan with ``home = "origin"`` parks it."""
@@ -44,7 +47,7 @@ class SimConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """The lidar's output rate."""
     seed: Seed = 0
     """Noise seed (the world's shape has its own, ``world.seed``)."""
-    start: tuple[Coordinate, Coordinate, Finite] | None = None
+    start: tuple[Coordinate, Coordinate, YawDeg] | None = None
     """The robot's start pose ``[x, y, yaw_deg]`` in the field frame (m, deg); none: the
     field's origin corner, facing along +x."""
     world: WorldConfig = msgspec.field(default_factory=WorldConfig)

@@ -1,4 +1,5 @@
-"""Voxels hidden behind foliage: what the voxel volume adds for what no ray reached.
+"""A plot's occupied voxels as a survey's rays estimate them, voxels hidden behind
+foliage included.
 
 A scanner in the lanes sees a canopy's surface; its inside, and its far side from
 where no scan stood, stay dark. Counting only the voxels that hold a return measures
@@ -23,9 +24,11 @@ over the plot's slices seen from both lanes (slices one voxel long, across the r
 seen by the ``seen`` trait's test, :func:`common.canopy.both_sides`: a point in the
 outer third on each side) and carried to its whole length: the seen slices' mean
 times the plot's slices, the ratio estimate of a partly observed plot. A plot seen
-so over less than ``min_seen`` of its slices (the traits' flag for one too occluded
-to trust) keeps the count over all its slices: a few slices carried to its length
-would say more than they hold. Never fewer voxels than hold a return.
+so over less than ``min_seen`` of these voxel-long slices keeps the count over all
+its slices: a few slices carried to its length would say more than they hold. (The
+``occluded`` flag compares the ``seen`` trait, over ``cell``-long slices, with the same
+``min_seen``: the two shares are close but not the same.) Never fewer voxels than
+hold a return.
 
 The rays are walked from each scan's scanner position to each point of it in steps
 of half a voxel (:func:`_walk`), compiled, on every core.
@@ -39,13 +42,11 @@ import numba as nb
 import numpy as np
 
 from common.arrays import F64, I64, Bool
-from common.canopy import CanopyDefinition, both_sides, footprint_cells, row_axis
+from common.canopy import MAX_HEIGHT_M, CanopyDefinition, both_sides, footprint_cells, row_axis
 from common.cropmodel import plot_bands
 from common.field import Field
 from services.traits.ground import GroundModel
 from services.traits.run import Views
-
-MAX_HEIGHT_M = 10.0  # the highest a canopy is walked and counted above the ground
 
 
 def occupied_voxels(
@@ -72,13 +73,13 @@ def occupied_voxels(
         passed,
     )  # fmt: skip
     order, starts = groups
-    xy, h, canopy = xyz[order, :2], h[order], canopy[order]
+    gxy, gh, gcanopy = xyz[order, :2], h[order], canopy[order]  # grouped by plot
     out = np.zeros(len(boxes))
     for k in range(len(boxes)):
         mine = slice(starts[k], starts[k + 1])
         grid = passed[offset[k] : offset[k + 1]].reshape(dims[k, 0], dims[k, 1], layers)
-        hit, occupied = _occupied(xy[mine], h[mine], canopy[mine], boxes[k], grid, d.voxel)
-        counted = _over_seen_slices(occupied, xy[mine], boxes[k], d.voxel, min_seen)
+        hit, occupied = _occupied(gxy[mine], gh[mine], gcanopy[mine], boxes[k], grid, d.voxel)
+        counted = _over_seen_slices(occupied, gxy[mine], boxes[k], d.voxel, min_seen)
         out[k] = max(counted, float(hit.sum()))
     return out
 

@@ -20,8 +20,8 @@ from common.field_geojson import (
     load_frame,
     placed,
 )
+from tests.conftest import REPO
 
-REPO = Path(__file__).resolve().parents[2]
 NO_ORIGIN = REPO / "tests" / "data" / "no_origin.toml"
 
 

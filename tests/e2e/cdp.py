@@ -18,6 +18,7 @@ from typing import Any
 
 import websocket
 
+from common.process import stop_process
 from tests.conftest import free_port
 
 # Software WebGL (SwiftShader): headless machines have no GPU. Every host name but
@@ -101,10 +102,5 @@ class Browser:
         try:
             self.ws.close()
         finally:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+            stop_process(self.proc, 10.0)
             self.profile.cleanup()
