@@ -18,6 +18,13 @@ barrier over Zenoh. Step ``k`` at sim time ``t``:
 3. The simulator, once every participant has acknowledged, takes in the wheel
    commands those acknowledgements count and steps the world.
 
+A world started held (``phenorover sim``: until the survey has started) publishes
+nothing until it is let run, then first calls the roll: a tick every participant only
+acknowledges with its counts, taking nothing in and running nothing. Its first step
+then expects every message published while it was held (the survey's start among
+them), and nobody has done anything before it: a start that depended on which
+service came up first, or on how long the world was held, would not repeat itself.
+
 A message published in answer to step k is therefore taken in at step k+1 by
 whoever reads it, whatever the machine's load: the same seed gives the same run. An
 RPC from a participant is answered once the callee has finished the caller's step
@@ -35,144 +42,32 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
+from common.mailbox import Inbox
 from common.messages.sim import SimClock as SimClockMsg
 
 log = logging.getLogger(__name__)
-
-Thunk = Callable[[], None]
-# how long (wall) the first message of a publisher on a key is waited for, from the
-# first step that expected it: a subscription Zenoh has not routed yet never gets it
-# (it is then taken as it comes, not waited for), while one that is routed gets it
-# in well under a millisecond on loopback, and within this even beside a busy loop
-# on every core (where tens of milliseconds are not enough)
-FIRST_GRACE_S = 2.0
-
-
-def attachment(service: str, seq: int) -> bytes:
-    """The bytes a lockstep publisher attaches to each message: who sent it, its number."""
-    return f"{service}\n{seq}".encode()
-
-
-def parse_attachment(data: bytes) -> tuple[str, int] | None:
-    """(service, sequence) of a lockstep message; None for any other attachment."""
-    try:
-        service, seq = data.decode().split("\n")
-        return service, int(seq)
-    except (UnicodeDecodeError, ValueError):
-        return None
-
-
-def caller_attachment(sim_ns: int) -> bytes:
-    """What a lockstep caller attaches to its query: its time."""
-    return f"at\n{sim_ns}".encode()
-
-
-def caller_time(data: bytes | None) -> int | None:
-    """The time a lockstep caller stamped its query with (None: no stamp)."""
-    try:
-        what, ns = data.decode().split("\n") if data is not None else ("", "")
-        return int(ns) if what == "at" else None
-    except (UnicodeDecodeError, ValueError):
-        return None
-
-
-class Inbox:
-    """Messages of lockstep publishers, held until the step that expects them; per
-    subscription (two subscriptions of one process to a key each get every message)."""
-
-    def __init__(self, intersects: Callable[[str, str], bool]) -> None:
-        self._intersects = intersects  # whether two key expressions share a key
-        self._cond = threading.Condition()
-        self._pending: list[tuple[str, str, int, int, Thunk]] = []
-        self._subscribed: list[str] = []  # by subscription number
-        self._fresh: list[int] = []  # subscriptions no step has seen yet
-        # (subscription, "<service>|<key>") -> highest sequence received; and those a
-        # message has come from at all
-        self._received: dict[tuple[int, str], int] = {}
-        self._seen: set[tuple[int, str]] = set()
-        # (subscription, name) never seen -> when (monotonic) a step first expected it
-        self._first_expected: dict[tuple[int, str], float] = {}
-        self._matches: dict[str, list[int]] = {}
-
-    def subscribed(self, key: str) -> int:
-        """A subscription of this process (its number, for :meth:`deliver`): the
-        expected messages on keys it intersects are waited for, from the first step
-        after it on (what was published before it was declared never reaches it)."""
-        with self._cond:
-            self._subscribed.append(key)
-            self._fresh.append(len(self._subscribed) - 1)
-            self._matches.clear()
-            return len(self._subscribed) - 1
-
-    def _subs(self, name: str) -> list[int]:
-        """The subscriptions a "<service>|<key>" reaches."""
-        hit = self._matches.get(name)
-        if hit is None:
-            key = name.split("|", 1)[1]
-            hit = [i for i, s in enumerate(self._subscribed) if self._intersects(s, key)]
-            self._matches[name] = hit
-        return hit
-
-    def deliver(self, sub: int, key: str, service: str, seq: int, thunk: Thunk) -> None:
-        """Hold ``thunk`` (the callback of subscription ``sub`` with its message) until
-        its step; a message seen before (a history subscriber's replay) is dropped."""
-        name = (sub, f"{service}|{key}")
-        with self._cond:
-            if seq <= self._received.get(name, 0):
-                return
-            self._received[name] = seq
-            self._seen.add(name)
-            self._pending.append((service, key, seq, sub, thunk))
-            self._cond.notify_all()
-
-    def take(self, expect: dict[str, int], timeout: float) -> tuple[list[Thunk], list[str]]:
-        """Wait up to ``timeout`` s for every expected message on a subscribed key;
-        return the callbacks due (expected ones, and those of publishers the step does
-        not know yet) in a fixed order, and what never came (``"<service>|<key>"``)."""
-        end = time.monotonic() + timeout
-        with self._cond:
-            wanted = [((i, name), n) for name, n in expect.items() for i in self._subs(name)]
-            for (i, name), n in wanted:
-                if i in self._fresh:
-                    self._received[(i, name)] = max(self._received.get((i, name), 0), n)
-            self._fresh.clear()
-            now = time.monotonic()
-            for sub_name, _ in wanted:
-                if sub_name not in self._seen:
-                    self._first_expected.setdefault(sub_name, now)
-
-            def missing() -> list[str]:
-                # a publisher never heard from is waited for only for a while: Zenoh
-                # may not have routed this subscription to it yet (its first messages
-                # are then lost)
-                now = time.monotonic()
-                return [
-                    name[1]
-                    for name, n in wanted
-                    if self._received.get(name, 0) < n
-                    and (name in self._seen or now < self._first_expected[name] + FIRST_GRACE_S)
-                ]
-
-            while (late := missing()) and (left := end - time.monotonic()) > 0:
-                self._cond.wait(min(left, 0.05))
-            due: list[tuple[str, str, int, int, Thunk]] = []
-            keep: list[tuple[str, str, int, int, Thunk]] = []
-            for item in self._pending:
-                limit = expect.get(f"{item[0]}|{item[1]}")
-                (due if limit is None or item[2] <= limit else keep).append(item)
-            self._pending = keep
-        due.sort(key=lambda it: it[:4])
-        return [it[4] for it in due], sorted(set(late))
 
 
 class LockstepClock:
     """A participant's clock (the :class:`common.clock.Clock` protocol): time moves
     only with the ticks, and each step's work is done in a fixed order before it is
-    acknowledged (see the module). ``ack(sim_ns)`` publishes the acknowledgement."""
+    acknowledged (see the module). ``ack(sim_ns, roll_call, published)`` publishes the
+    acknowledgement; ``counts()`` is what this participant has published so far, and
+    ``begin()`` sends what it published before the world began."""
 
-    def __init__(self, inbox: Inbox, ack: Callable[[int], None], deadline_s: float) -> None:
+    def __init__(
+        self,
+        inbox: Inbox,
+        ack: Callable[[int, bool, dict[str, int]], None],
+        deadline_s: float,
+        counts: Callable[[], dict[str, int]] = dict,
+        begin: Callable[[], None] = lambda: None,
+    ) -> None:
         self.inbox = inbox
         self._ack = ack
+        self._counts = counts
+        self._begin = begin  # at the roll call or first step: send what waited for it
+        self._acked_counts: dict[str, int] = {}
         self.deadline_s = deadline_s
         self._cond = threading.Condition()
         self._now = 0
@@ -195,6 +90,13 @@ class LockstepClock:
 
     def wait_started(self, timeout: float) -> bool:
         return self._started.wait(timeout)
+
+    def stamp(self) -> int | None:
+        """The time an RPC of this participant carries: None before its first step
+        (a caller of a world still held is answered at once, by a callee that has
+        done nothing yet either)."""
+        with self._cond:
+            return self._now if self._started.is_set() else None
 
     def sleep_until_ns(self, t_ns: int, stop: threading.Event) -> bool:
         me = threading.current_thread()
@@ -235,7 +137,18 @@ class LockstepClock:
                 msg = self._ticks.get(timeout=0.5)
             except queue.Empty:
                 continue
+            if msg.roll_call:
+                with self.step_lock:
+                    self.inbox.settle()
+                    self._begin()
+                    counts = self._counts()
+                self._ack(msg.sim_ns, True, counts)
+                continue
+            if msg.sim_ns <= self.acked_ns:  # sent again: acknowledged again, not done again
+                self._ack(msg.sim_ns, False, self._acked_counts)
+                continue
             with self.step_lock:
+                self._begin()
                 with self._cond:  # the step's messages are taken in at its time
                     self._now = max(self._now, msg.sim_ns)
                 thunks, late = self.inbox.take(dict(msg.expect), self.deadline_s)
@@ -244,11 +157,14 @@ class LockstepClock:
                 for thunk in thunks:
                     thunk()
                 self._run_threads(msg.sim_ns)
+                # counted at the step's end, under its lock: what an RPC served after it
+                # publishes is counted in the next step's, however late this is sent
+                self._acked_counts = self._counts()
                 with self._cond:
                     self.acked_ns = msg.sim_ns
                     self._cond.notify_all()
             self._started.set()
-            self._ack(msg.sim_ns)
+            self._ack(msg.sim_ns, False, self._acked_counts)
 
     def _run_threads(self, t_ns: int) -> None:
         """Let every thread waiting until ``t_ns`` or earlier run, one at a time."""

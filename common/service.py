@@ -31,7 +31,8 @@ from common import keys
 from common.clock import Clock
 from common.config import ConfigError, dump_toml, zenoh_config
 from common.field import FieldError
-from common.lockstep import Inbox, LockstepClock
+from common.lockstep import LockstepClock
+from common.mailbox import Inbox
 from common.messages.system import Health, Pong, ServiceConfig
 from common.robot import Robot, default_robot
 from common.service_args import EXIT_CONFIG, CliOptions, Launch, parse

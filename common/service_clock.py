@@ -3,12 +3,16 @@ simulator's followed, or the simulator's in lockstep (:mod:`common.lockstep`).""
 
 from __future__ import annotations
 
+import contextlib
 from typing import Literal
+
+import zenoh
 
 from common import keys
 from common.clock import Clock, SimClock, WallClock
 from common.config import Manifest
-from common.lockstep import Inbox, LockstepClock
+from common.lockstep import LockstepClock
+from common.mailbox import Inbox
 from common.messages.sim import ClockAck
 from common.transport import Bus, key_intersects
 
@@ -28,10 +32,20 @@ def service_clock(
     if lockstep == "participant" and manifest is not None and inbox is not None:
         ack = bus.publisher(keys.SIM_ACK.at(service=bus.participant))  # before numbering starts
 
-        def acked(t: int) -> None:
-            ack.put(ClockAck(stamp_ns=t, service=bus.participant, sim_ns=t, published=bus.counts()))
+        def acked(t: int, roll_call: bool, published: dict[str, int]) -> None:
+            msg = ClockAck(
+                stamp_ns=t,
+                service=bus.participant,
+                sim_ns=t,
+                published=published,
+                roll_call=roll_call,
+            )
+            with contextlib.suppress(zenoh.ZError):  # the service stopped mid-step
+                ack.put(msg)
 
-        step_clock = LockstepClock(inbox, acked, manifest.lockstep_deadline_s)
+        step_clock = LockstepClock(
+            inbox, acked, manifest.lockstep_deadline_s, bus.counts, bus.begin
+        )
         bus.use_lockstep(inbox, step_clock)
         bus.report("lockstep_late", lambda: step_clock.late)
         bus.subscribe(keys.SIM_CLOCK, step_clock.update, immediate=True)

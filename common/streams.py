@@ -88,16 +88,19 @@ def key_intersects(a: str, b: str) -> bool:
     return bool(zenoh.KeyExpr(a).intersects(zenoh.KeyExpr(b)))
 
 
+AnyPublisher = zenoh.Publisher | zenoh.ext.AdvancedPublisher
+
+
 class Publisher(Generic[M]):
     def __init__(
         self,
-        pub: zenoh.Publisher | zenoh.ext.AdvancedPublisher,
+        pub: AnyPublisher,
         topic: Topic[M],
-        stamp: Callable[[str], bytes | None] = lambda _key: None,
+        send: Callable[[AnyPublisher, str, bytes], None] | None = None,
     ) -> None:
         self._pub = pub
         self.topic = topic
-        self._stamp = stamp  # the lockstep attachment of the next message, if any
+        self._send = send  # in lockstep: numbers each message (the bus's), or holds it
 
     def wait_matched(self, timeout: float) -> bool:
         """Block until some subscriber matches this key (True) or ``timeout`` s pass."""
@@ -114,4 +117,7 @@ class Publisher(Generic[M]):
             raise TypeError(
                 f"{self.topic.key} carries {self.topic.type.__name__}, not {type(msg).__name__}"
             )
-        self._pub.put(encode(msg), attachment=self._stamp(self.topic.key))
+        if self._send is None:
+            self._pub.put(encode(msg))
+        else:
+            self._send(self._pub, self.topic.key, encode(msg))

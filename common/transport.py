@@ -14,7 +14,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import sys
-import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
@@ -24,14 +23,8 @@ import zenoh.ext
 
 from common.codec import DecodeStats, decode, encode
 from common.keys import ALIVE_ALL, Rpc, Topic, participant
-from common.lockstep import (
-    Inbox,
-    LockstepClock,
-    attachment,
-    caller_attachment,
-    caller_time,
-    parse_attachment,
-)
+from common.lockstep import LockstepClock
+from common.mailbox import Inbox, Outbox, caller_attachment, caller_time, parse_attachment
 from common.rpc import RequestError, RpcError, RpcTimeout, answer, first_reply, good_replies
 from common.streams import Latest, Publisher, declare_publisher, key_intersects
 
@@ -72,28 +65,26 @@ class Bus:
         # lockstep with the simulator (common/lockstep.py): off unless use_lockstep
         self._inbox: Inbox | None = None
         self._clock: LockstepClock | None = None
-        self._seq_lock = threading.Lock()
-        self.published: dict[str, int] = {}  # key -> messages put on it, in lockstep
+        self._outbox: Outbox | None = None
 
     def use_lockstep(self, inbox: Inbox, clock: LockstepClock | None = None) -> None:
         """Take part in the simulator's lockstep: number every message put (and send
         it with congestion control BLOCK: a dropped one would be waited for), hold
         each numbered message received until its step (``inbox``), and with
-        ``clock`` answer RPCs between steps and stamp calls with the caller's time.
-        Call before declaring publishers and subscribers."""
+        ``clock`` (a participant) hold what it puts until its first step, answer RPCs
+        between steps and stamp calls with the caller's time. Call before declaring
+        publishers and subscribers."""
         self._inbox, self._clock = inbox, clock
+        self._outbox = Outbox(self.participant, hold=clock is not None)
 
     def counts(self) -> dict[str, int]:
         """How many messages have been put per key, in lockstep."""
-        with self._seq_lock:
-            return dict(self.published)
+        return {} if self._outbox is None else self._outbox.counts()
 
-    def _stamp(self, key: str) -> bytes | None:
-        if self._inbox is None:
-            return None
-        with self._seq_lock:
-            n = self.published[key] = self.published.get(key, 0) + 1
-        return attachment(self.participant, n)
+    def begin(self) -> None:
+        """In lockstep, send what was put before the participant's first step."""
+        if self._outbox is not None:
+            self._outbox.begin()
 
     def _dropped(self, key: str, exc: Exception) -> None:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -136,10 +127,10 @@ class Bus:
         """A publisher on ``topic``; in lockstep its messages are numbered unless
         ``in_step`` is False (a heartbeat on the wall clock, which no step waits for)."""
         topic = topic.within(self.namespace)
-        numbered = self._inbox is not None and in_step
-        pub = declare_publisher(self.session, topic, numbered)
+        outbox = self._outbox if in_step else None
+        pub = declare_publisher(self.session, topic, outbox is not None)
         self._handles.append(pub)
-        return Publisher(pub, topic, self._stamp) if numbered else Publisher(pub, topic)
+        return Publisher(pub, topic, None if outbox is None else outbox.send)
 
     def subscribe(
         self, topic: Topic[M], callback: Callable[[M], object], immediate: bool = False
@@ -193,7 +184,8 @@ class Bus:
         rpc = rpc.within(self.namespace)
         at = None
         if self._clock is not None:
-            at = caller_attachment(self._clock.now_ns())
+            stamp = self._clock.stamp()
+            at = None if stamp is None else caller_attachment(stamp)
             timeout = max(timeout, self._clock.deadline_s)
         replies = self.session.get(rpc.key, payload=encode(request), timeout=timeout, attachment=at)
         return first_reply(replies, rpc, timeout)

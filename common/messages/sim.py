@@ -32,6 +32,10 @@ class SimClock(Message, frozen=True, kw_only=True):
     # wait), and per "<service>|<key>" how many messages the step expects delivered
     step: int = -1
     expect: dict[str, int] = msgspec.field(default_factory=dict)
+    # lockstep's roll call, before the world's first step: each participant only
+    # acknowledges it with its counts (every message it published before the world
+    # began is then expected in that first step), taking nothing in, running nothing
+    roll_call: bool = False
 
 
 class SimRun(Message, frozen=True, kw_only=True):
@@ -50,6 +54,7 @@ class ClockAck(Message, frozen=True, kw_only=True):
     service: str
     sim_ns: Annotated[int, msgspec.Meta(ge=0)]
     published: dict[str, int] = msgspec.field(default_factory=dict)
+    roll_call: bool = False  # the answer to a roll call (``SimClock.roll_call``)
 
 
 class TruthPose(Message, frozen=True, kw_only=True):

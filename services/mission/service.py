@@ -50,7 +50,7 @@ class MissionService:
         bus = ctx.bus
         self.state_pub = bus.publisher(keys.MISSION_STATE)
         self.event_pub = bus.publisher(keys.MISSION_EVENT)
-        self.plan_pub = bus.publisher(keys.MISSION_PLAN)
+        self.plan_pub = bus.publisher(keys.MISSION_PLAN, in_step=False)  # dashboard's, wall time
         self.plan: PlanResult | None = None
         self._plan_sent = 0.0
         self.log: MissionLog | None = None

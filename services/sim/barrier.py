@@ -36,9 +36,11 @@ class Barrier:
         bus.watch(keys.LOCKSTEP_ALL, self._on_token)
 
     def _on_ack(self, ack: ClockAck) -> None:
+        # a roll call's answer counts as a step just before the one it was called at
+        at = ack.sim_ns - 1 if ack.roll_call else ack.sim_ns
         with self._cond:
-            if ack.sim_ns >= self._acked.get(ack.service, -1):
-                self._acked[ack.service] = ack.sim_ns
+            if at >= self._acked.get(ack.service, at - 1):
+                self._acked[ack.service] = at
                 self._counts[ack.service] = dict(ack.published)
             self._cond.notify_all()
 
@@ -73,10 +75,10 @@ class Barrier:
         """Until every participant has acknowledged the step at ``t_ns`` (sending its
         tick again every ``RESEND_S``): those that never did within the deadline.
         ``everyone``: a service whose token is up counts even before its first
-        acknowledgement (the world's first step: each service then starts with it)."""
+        acknowledgement (the roll call before the world's first step)."""
         end = time.monotonic() + self.deadline_s
         next_send = time.monotonic() + RESEND_S
-        unheard = -1 if everyone else t_ns
+        unheard = t_ns - 1 if everyone else t_ns
         with self._cond:
             while True:
                 late = [s for s in self._alive if self._acked.get(s, unheard) < t_ns]

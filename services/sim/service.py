@@ -190,18 +190,23 @@ class SimService:
         return self._tick
 
     def _hold(self, stop: threading.Event) -> None:
-        """Stand at the first step until asked to run, its tick sent again now and
-        then for the services still starting."""
+        """Publish nothing until asked to run, then call the roll (:mod:`common.lockstep`):
+        the first step then expects all that was published while held."""
+        assert self.barrier is not None
         self.ctx.log.info("held at sim time %.2f s until asked to run", self.sim_ns / NS)
-        while self._held.is_set() and not stop.wait(0.5):
-            self.clock_pub.put(self._tick)
+        while self._held.is_set():
+            if stop.wait(0.05):
+                return
+        self._tick = SimClock(stamp_ns=self.sim_ns, sim_ns=self.sim_ns, step=0, roll_call=True)
+        self.clock_pub.put(self._tick)
+        # every service up answers it, however slowly a loaded machine brought it up
+        self.barrier.wait(self.sim_ns - 1, lambda: self.clock_pub.put(self._tick), stop, True)
 
-    def _await_step(self, stop: threading.Event, everyone: bool = False) -> None:
+    def _await_step(self, stop: threading.Event) -> None:
         """Lockstep: wait for every participant's acknowledgement of this step, then
-        take in the wheel commands they counted in it (``everyone``: see
-        :meth:`Barrier.wait`)."""
+        take in the wheel commands they counted in it."""
         assert self.barrier is not None and self.ctx.inbox is not None
-        self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop, everyone)
+        self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop)
         expect = self.barrier.expect(self.ctx.bus.participant, self.ctx.bus.counts())
         thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
         for thunk in thunks:  # each takes the world's lock itself
@@ -240,6 +245,9 @@ class SimService:
         k = 0
         if self.sim_ns > 0:  # a world carried on from its snapshot is not held again
             self._held.clear()
+        if self._held.is_set():
+            self._hold(stop)
+            t_next = time.monotonic()
         while not stop.is_set():
             with self._lock:
                 # what the devices sense, then the tick expecting it
@@ -258,12 +266,6 @@ class SimService:
                 self.clock_pub.put(self._tick)
             if self.barrier is not None:
                 self._await_step(stop)
-                if self._held.is_set():
-                    self._hold(stop)
-                    # released: the first step waits for every service up, however
-                    # slowly a loaded machine brought it to its first tick
-                    self._await_step(stop, everyone=True)
-                    t_next = time.monotonic()
             with self._lock:
                 self._step(dt)
             k += 1

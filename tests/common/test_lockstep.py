@@ -9,10 +9,11 @@ import time
 
 import pytest
 
-from common import lockstep
-from common.lockstep import (
+from common import mailbox
+from common.lockstep import LockstepClock
+from common.mailbox import (
     Inbox,
-    LockstepClock,
+    Outbox,
     attachment,
     caller_attachment,
     caller_time,
@@ -84,7 +85,7 @@ def test_the_first_message_of_a_publisher_is_waited_for_on_a_loaded_machine() ->
 def test_a_publisher_never_routed_to_a_subscription_is_waited_for_once(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    monkeypatch.setattr(lockstep, "FIRST_GRACE_S", 0.2)
+    monkeypatch.setattr(mailbox, "FIRST_GRACE_S", 0.2)
     inbox, _ = inbox_with("fix")
     t0 = time.monotonic()
     thunks, missing = inbox.take({"gnss|fix": 1}, 5.0)
@@ -121,7 +122,7 @@ def test_the_clock_runs_each_due_thread_in_turn_and_then_acknowledges() -> None:
     acks: list[int] = []
     acked = threading.Condition()
 
-    def ack(t: int) -> None:
+    def ack(t: int, roll_call: bool, published: dict[str, int]) -> None:
         with acked:
             acks.append(t)
             acked.notify_all()
@@ -163,7 +164,7 @@ def test_the_clock_runs_each_due_thread_in_turn_and_then_acknowledges() -> None:
 
 
 def test_an_rpc_is_served_once_the_callee_has_done_the_callers_step() -> None:
-    clock = LockstepClock(Inbox(same_key), lambda t: None, deadline_s=5.0)
+    clock = LockstepClock(Inbox(same_key), lambda *_: None, deadline_s=5.0)
     served = threading.Event()
 
     def serve() -> None:
@@ -182,3 +183,112 @@ def test_a_query_carries_its_callers_time() -> None:
     assert caller_time(caller_attachment(123_000_000)) == 123_000_000
     assert caller_time(None) is None
     assert caller_time(attachment("nav", 1)) is None
+
+
+def test_a_message_no_acknowledgement_has_counted_waits_for_the_step_that_does() -> None:
+    # a publisher's first message, sent by an RPC's handler after its step was
+    # acknowledged: taken in whenever it arrived, it would be taken at a step the
+    # machine's load chose
+    inbox, (sub,) = inbox_with("cmd_vel")
+    inbox.deliver(sub, "cmd_vel", "nav", 1, lambda: None)
+    thunks, missing = inbox.take({"sim|clock": 4}, 1.0)
+    assert thunks == [] and missing == []
+    thunks, missing = inbox.take({"sim|clock": 5, "nav|cmd_vel": 1}, 1.0)
+    assert len(thunks) == 1 and missing == []
+
+
+class Acks:
+    """A participant's acknowledgements, as the simulator would hear them."""
+
+    def __init__(self) -> None:
+        self.got: list[tuple[int, bool, dict[str, int]]] = []
+        self._cond = threading.Condition()
+
+    def __call__(self, t: int, roll_call: bool, published: dict[str, int]) -> None:
+        with self._cond:
+            self.got.append((t, roll_call, dict(published)))
+            self._cond.notify_all()
+
+    def wait(self, n: int) -> list[tuple[int, bool, dict[str, int]]]:
+        with self._cond:
+            assert self._cond.wait_for(lambda: len(self.got) >= n, 5.0), self.got
+            return list(self.got)
+
+
+def test_a_tick_sent_again_is_acknowledged_again_not_done_again() -> None:
+    acks, counts = Acks(), {"odom": 1}
+    inbox, (sub,) = inbox_with("fix")
+    clock = LockstepClock(inbox, acks, deadline_s=5.0, counts=lambda: dict(counts))
+    runs: list[int] = []
+    stop = threading.Event()
+
+    def worker() -> None:
+        while clock.sleep_until_ns(0, stop):  # asks for no time at all: due at every step
+            runs.append(clock.now_ns())
+            counts["odom"] += 1
+            if clock.sleep_until_ns(1_000_000_000, stop):
+                return
+
+    threading.Thread(target=worker, daemon=True).start()
+    while not clock._waiting:
+        time.sleep(0.001)
+    tick(clock, 0, 0)
+    acks.wait(1)
+    inbox.deliver(sub, "fix", "gnss", 1, lambda: runs.append(-1))
+    tick(clock, 0, 0)  # the same tick again (its acknowledgement was late)
+    got = acks.wait(2)
+    assert runs == [0] and got == [(0, False, {"odom": 2}), (0, False, {"odom": 2})]
+    stop.set()
+    clock.close()
+
+
+def test_a_roll_call_is_only_answered() -> None:
+    acks, begun = Acks(), threading.Event()
+    inbox, (sub,) = inbox_with("fix")
+    clock = LockstepClock(inbox, acks, deadline_s=5.0, counts=lambda: {"plan": 2}, begin=begun.set)
+    stop = threading.Event()
+    ran: list[str] = []
+
+    def worker() -> None:
+        if clock.sleep_until_ns(0, stop):
+            ran.append("thread")
+
+    threading.Thread(target=worker, daemon=True).start()
+    inbox.deliver(sub, "fix", "gnss", 1, lambda: ran.append("fix"))
+    clock.update(SimClock(sim_ns=0, step=0, roll_call=True))
+    assert acks.wait(1) == [(0, True, {"plan": 2})]
+    # what waited for the world was sent; nothing ran, the clock has not started, and
+    # its RPCs carry no time yet
+    assert begun.is_set() and ran == []
+    assert not clock.wait_started(0.0) and clock.stamp() is None
+    tick(clock, 0, 0)
+    acks.wait(2)
+    assert clock.stamp() == 0
+    stop.set()
+    clock.close()
+
+
+class FakePublisher:
+    def __init__(self) -> None:
+        self.sent: list[tuple[bytes, bytes]] = []
+
+    def put(self, payload: bytes, attachment: bytes) -> None:
+        self.sent.append((payload, attachment))
+
+
+def test_an_outbox_holds_a_participants_messages_until_its_first_step() -> None:
+    pub = FakePublisher()
+    out = Outbox("scanner", hold=True)
+    out.send(pub, "status", b"idle")  # type: ignore[arg-type]
+    assert pub.sent == [] and out.counts() == {}
+    out.begin()
+    out.send(pub, "status", b"scanning")  # type: ignore[arg-type]
+    assert pub.sent == [
+        (b"idle", attachment("scanner", 1)),
+        (b"scanning", attachment("scanner", 2)),
+    ]
+    assert out.counts() == {"status": 2}
+    # the world's own outbox holds nothing
+    world = Outbox("sim", hold=False)
+    world.send(pub, "clock", b"t")  # type: ignore[arg-type]
+    assert pub.sent[-1] == (b"t", attachment("sim", 1))

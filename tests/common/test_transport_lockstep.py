@@ -12,7 +12,8 @@ import threading
 import pytest
 
 from common import keys
-from common.lockstep import Inbox, LockstepClock
+from common.lockstep import LockstepClock
+from common.mailbox import Inbox
 from common.messages.system import Ping, Pong
 from common.transport import RpcTimeout
 from tests.conftest import client
@@ -35,7 +36,7 @@ def test_a_lockstep_call_outwaits_a_slow_callee_and_a_free_one_does_not(
         release.set()  # the first call's answer is late, not lost
 
         release.clear()
-        clock = LockstepClock(Inbox(lambda a, b: a == b), lambda t: None, deadline_s=10.0)
+        clock = LockstepClock(Inbox(lambda a, b: a == b), lambda *_: None, deadline_s=10.0)
         caller.use_lockstep(Inbox(lambda a, b: a == b), clock)
         answer: list[Pong] = []
         t = threading.Thread(target=lambda: answer.append(caller.call(rpc, Ping(), timeout=0.2)))
