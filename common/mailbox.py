@@ -147,10 +147,12 @@ class Inbox:
 class Outbox:
     """Numbers what a lockstep publisher sends, per key (its attachment says who sent
     it and its number); with ``hold`` (a participant), holds every message until its
-    first step (:meth:`begin`)."""
+    first step (:meth:`begin`). ``sender``, the name its messages and counts go by, is
+    the service's with this process's start: a service restarted numbers from 1
+    again, and under its old name every subscriber would take those for replays."""
 
-    def __init__(self, sender: str, hold: bool) -> None:
-        self.sender = sender
+    def __init__(self, service: str, hold: bool) -> None:
+        self.sender = f"{service}@{time.time_ns()}"
         self._lock = threading.Lock()
         self._published: dict[str, int] = {}  # key -> messages put on it
         self._unsent: list[tuple[AnyPublisher, str, bytes]] | None = [] if hold else None

@@ -39,6 +39,7 @@ def service_clock(
                 sim_ns=t,
                 published=published,
                 roll_call=roll_call,
+                sender=bus.sender,
             )
             with contextlib.suppress(zenoh.ZError):  # the service stopped mid-step
                 ack.put(msg)

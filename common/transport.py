@@ -77,6 +77,11 @@ class Bus:
         self._inbox, self._clock = inbox, clock
         self._outbox = Outbox(self.participant, hold=clock is not None)
 
+    @property
+    def sender(self) -> str:
+        """The name this process's lockstep messages and counts go by."""
+        return self.participant if self._outbox is None else self._outbox.sender
+
     def counts(self) -> dict[str, int]:
         """How many messages have been put per key, in lockstep."""
         return {} if self._outbox is None else self._outbox.counts()

@@ -55,6 +55,8 @@ class ClockAck(Message, frozen=True, kw_only=True):
     sim_ns: Annotated[int, msgspec.Meta(ge=0)]
     published: dict[str, int] = msgspec.field(default_factory=dict)
     roll_call: bool = False  # the answer to a roll call (``SimClock.roll_call``)
+    # the name its messages go by (common.mailbox.Outbox: changes with a restart)
+    sender: str = ""
 
 
 class TruthPose(Message, frozen=True, kw_only=True):

@@ -29,7 +29,8 @@ class Barrier:
         self.deadline_s = deadline_s
         self._cond = threading.Condition()
         self._acked: dict[str, int] = {}  # participant -> the step time it last acked
-        self._counts: dict[str, dict[str, int]] = {}  # participant -> its published counts
+        # participant -> the name its messages go by, and how many it has published
+        self._counts: dict[str, tuple[str, dict[str, int]]] = {}
         self._alive: set[str] = set()
         self.late = 0  # steps taken without a participant's acknowledgement
         bus.subscribe(keys.SIM_ACK.at(service="*"), self._on_ack, immediate=True)
@@ -41,7 +42,7 @@ class Barrier:
         with self._cond:
             if at >= self._acked.get(ack.service, at - 1):
                 self._acked[ack.service] = at
-                self._counts[ack.service] = dict(ack.published)
+                self._counts[ack.service] = (ack.sender or ack.service, dict(ack.published))
             self._cond.notify_all()
 
     def _on_token(self, key: str, alive: bool) -> None:
@@ -58,7 +59,7 @@ class Barrier:
         """What the next step expects delivered: every participant's messages as of
         its last acknowledgement, and ``own``'s ``counts`` (the simulator's)."""
         with self._cond:
-            out = {f"{svc}|{k}": n for svc, c in self._counts.items() for k, n in c.items()}
+            out = {f"{who}|{k}": n for who, c in self._counts.values() for k, n in c.items()}
         return out | {f"{own}|{k}": n for k, n in counts.items()}
 
     def participants(self) -> list[str]:

@@ -207,7 +207,7 @@ class SimService:
         take in the wheel commands they counted in it."""
         assert self.barrier is not None and self.ctx.inbox is not None
         self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop)
-        expect = self.barrier.expect(self.ctx.bus.participant, self.ctx.bus.counts())
+        expect = self.barrier.expect(self.ctx.bus.sender, self.ctx.bus.counts())
         thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
         for thunk in thunks:  # each takes the world's lock itself
             thunk()
@@ -261,7 +261,7 @@ class SimService:
                     step=-1 if b is None else k,
                     expect={}
                     if b is None
-                    else b.expect(self.ctx.bus.participant, self.ctx.bus.counts()),
+                    else b.expect(self.ctx.bus.sender, self.ctx.bus.counts()),
                 )
                 self.clock_pub.put(self._tick)
             if self.barrier is not None:

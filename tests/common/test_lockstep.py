@@ -283,12 +283,26 @@ def test_an_outbox_holds_a_participants_messages_until_its_first_step() -> None:
     assert pub.sent == [] and out.counts() == {}
     out.begin()
     out.send(pub, "status", b"scanning")  # type: ignore[arg-type]
-    assert pub.sent == [
-        (b"idle", attachment("scanner", 1)),
-        (b"scanning", attachment("scanner", 2)),
-    ]
+    me = out.sender
+    assert pub.sent == [(b"idle", attachment(me, 1)), (b"scanning", attachment(me, 2))]
     assert out.counts() == {"status": 2}
     # the world's own outbox holds nothing
     world = Outbox("sim", hold=False)
     world.send(pub, "clock", b"t")  # type: ignore[arg-type]
-    assert pub.sent[-1] == (b"t", attachment("sim", 1))
+    assert pub.sent[-1] == (b"t", attachment(world.sender, 1))
+
+
+def test_a_restarted_publisher_is_heard_from_its_first_message() -> None:
+    # nav killed after 300 commands and started again: its numbers start at 1 again,
+    # under a name of its own, so no subscriber takes them for replays of the old ones
+    before, after = Outbox("nav", hold=False), Outbox("nav", hold=False)
+    assert before.sender != after.sender and before.sender.startswith("nav@")
+    inbox, (sub,) = inbox_with("cmd_vel")
+    inbox.deliver(sub, "cmd_vel", before.sender, 300, lambda: None)
+    inbox.take({f"{before.sender}|cmd_vel": 300}, 1.0)
+    ran: list[int] = []
+    inbox.deliver(sub, "cmd_vel", after.sender, 1, lambda: ran.append(1))
+    thunks, missing = inbox.take({f"{after.sender}|cmd_vel": 1}, 1.0)
+    for t in thunks:
+        t()
+    assert ran == [1] and missing == []
