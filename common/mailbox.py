@@ -13,9 +13,9 @@ from common.streams import AnyPublisher
 Thunk = Callable[[], None]
 # how long (wall) the first message of a publisher on a key is waited for, from the
 # first step that expected it: a subscription Zenoh has not routed yet never gets it
-# (it is then no longer waited for), while one that is routed gets it
-# in well under a millisecond on loopback, and within this even beside a busy loop
-# on every core (where tens of milliseconds are not enough)
+# (it is then no longer waited for), while one that is routed gets it in well under
+# a millisecond on loopback, and within this even beside a busy loop on every core
+# (where tens of milliseconds are not enough)
 FIRST_GRACE_S = 2.0
 
 

@@ -114,7 +114,7 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     """At the route's end, a sideways offset from the leg beyond this is re-approached
     (m). With ``fine_tolerance_m`` along the leg it keeps the stop inside the mission's
     5 cm arrival check (2 and 4 cm make 4.5 cm); a re-approach costs about 20 s, and
-    visibility tolerates stops far further off (``FollowerConfig``)."""
+    visibility tolerates stops far further off (``phenorover.eval.tolerance``)."""
     arrival_heading_tolerance_deg: Annotated[float, msgspec.Meta(gt=0, le=180)] = 2.0
     """Arrival is declared only within this angle of the route's planned heading (and
     within the route's own distance, ``FollowRoute.arrival_tolerance_m``, the mission's

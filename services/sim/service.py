@@ -207,10 +207,13 @@ class SimService:
         take in the wheel commands they counted in it."""
         assert self.barrier is not None and self.ctx.inbox is not None
         self.barrier.wait(self.sim_ns, lambda: self.clock_pub.put(self._tick), stop)
-        expect = self.barrier.expect(self.ctx.bus.sender, self.ctx.bus.counts())
-        thunks, _ = self.ctx.inbox.take(expect, self.barrier.deadline_s)
+        thunks, _ = self.ctx.inbox.take(self._expect(self.barrier), self.barrier.deadline_s)
         for thunk in thunks:  # each takes the world's lock itself
             thunk()
+
+    def _expect(self, b: Barrier) -> dict[str, int]:
+        """What a step expects delivered: the participants' and the world's own."""
+        return b.expect(self.ctx.bus.sender, self.ctx.bus.counts())
 
     def _step(self, dt: float) -> None:
         self.sim_ns += int(dt * NS)
@@ -259,9 +262,7 @@ class SimService:
                     sim_ns=self.sim_ns,
                     real_time_factor=self.real_time_factor,
                     step=-1 if b is None else k,
-                    expect={}
-                    if b is None
-                    else b.expect(self.ctx.bus.sender, self.ctx.bus.counts()),
+                    expect={} if b is None else self._expect(b),
                 )
                 self.clock_pub.put(self._tick)
             if self.barrier is not None:

@@ -114,6 +114,12 @@ def test_two_subscriptions_to_a_key_each_get_every_message() -> None:
     assert ran == ["a", "b"]
 
 
+def waiting_on(clock: LockstepClock, th: threading.Thread) -> None:
+    """Until ``th`` waits on the clock (it says so on the clock's condition)."""
+    with clock._cond:
+        assert clock._cond.wait_for(lambda: th in clock._waiting, 5.0), th.name
+
+
 def tick(clock: LockstepClock, step: int, ms: int) -> None:
     clock.update(SimClock(sim_ns=ms * 1_000_000, step=step))
 
@@ -143,8 +149,7 @@ def test_the_clock_runs_each_due_thread_in_turn_and_then_acknowledges() -> None:
     ]
     for th in threads:
         th.start()
-        while th not in clock._waiting:  # registered in a known order
-            threading.Event().wait(0.001)
+        waiting_on(clock, th)  # registered in a known order
     for step, ms in enumerate((0, 20, 40, 60)):
         tick(clock, step, ms)
         due = ms * 1_000_000
@@ -229,9 +234,9 @@ def test_a_tick_sent_again_is_acknowledged_again_not_done_again() -> None:
             if clock.sleep_until_ns(1_000_000_000, stop):
                 return
 
-    threading.Thread(target=worker, daemon=True).start()
-    while not clock._waiting:
-        time.sleep(0.001)
+    th = threading.Thread(target=worker, daemon=True)
+    th.start()
+    waiting_on(clock, th)
     tick(clock, 0, 0)
     acks.wait(1)
     inbox.deliver(sub, "fix", "gnss", 1, lambda: runs.append(-1))
