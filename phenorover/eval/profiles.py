@@ -5,7 +5,8 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
 - one EKF over wheel odometry and the GNSS compass with robot_localization's
   defaults: measurements fused as they arrive (no lag compensation), no gate (its
   rejection thresholds default to none), static process noise, no standing-still
-  (zero-velocity) updates, no correlation scaling of standing fixes;
+  (zero-velocity) updates, no correlation scaling of standing fixes, no sideways
+  slip in a turn's process noise;
 - no IMU: a planar filter, base_link where the antennas lean, the yaw rate from
   the wheels alone;
 - pure pursuit with a 1 m look-ahead to the end, at 0.5 m/s (the paper states no
@@ -46,6 +47,7 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "dynamic_process_noise": False,
                 "zero_velocity_updates": False,
                 "gnss_correlation_s": 0.0,
+                "turn_slip_sd": 0.0,
             },
             "follower": {
                 "lookahead_m": 1.0,

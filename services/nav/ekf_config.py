@@ -6,7 +6,7 @@ from typing import Annotated
 
 import msgspec
 
-from common.messages.core import Positive
+from common.messages.core import NonNegative, Positive
 
 
 class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -22,6 +22,13 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     """Process noise of the position, m/sqrt(s): unmodelled slip and terrain."""
     yaw_process_sd: Positive = 0.005
     """Process noise of the heading, rad/sqrt(s)."""
+    turn_slip_sd: NonNegative = 0.04
+    """Process noise of the position per turn, m/sqrt(rad): a skid-steer turning in
+    place also moves sideways, as uneven traction moves its rotation centre off the
+    body centre (the paper's corner error: a few centimetres per quarter turn on
+    tilled soil). Without it the filter holds the pose of the turn's start, refuses the
+    fixes that show the shift, and the leg after the corner starts centimetres off the
+    line it believes it is on. 0 leaves the turn to ``pos_process_sd`` alone."""
     gate: bool = True
     """Refuse a measurement whose innovation is outside the chi-square gate."""
     localized_sigma_m: Positive = 0.05

@@ -171,7 +171,10 @@ class Filter:
         # (and the next odometry says so): without this the velocities' random walk
         # between two zero-velocity updates leaks into the heading
         accel = self.cfg.still_noise_share if self._still else 1.0
-        self._p = f @ self._p @ f.T + process_noise(self.cfg, share, accel, dt)
+        # the turn's sideways slip: only what turns faster than the encoders' noise
+        turned = max(0.0, abs(float(x[4])) - self.cfg.still_speed) * dt
+        q = process_noise(self.cfg, share, accel, dt, turned)
+        self._p = f @ self._p @ f.T + q
         self.height.var += share * self.cfg.z_process_sd**2 * dt
 
     def _correlation_scale(self, kind: str, t: float) -> float:

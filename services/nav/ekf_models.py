@@ -37,13 +37,17 @@ def motion_share(cfg: EkfConfig, v: float, w: float) -> float:
     return min(1.0, max(cfg.still_noise_share, moving / cfg.full_noise_speed))
 
 
-def process_noise(cfg: EkfConfig, share: float, accel_share: float, dt: float) -> F64:
-    """Q over ``dt`` s: slip on position and heading (``share`` of it, by speed), a
-    random walk on the velocities (``accel_share`` of it)."""
+def process_noise(
+    cfg: EkfConfig, share: float, accel_share: float, dt: float, turned: float = 0.0
+) -> F64:
+    """Q over ``dt`` s: slip on position and heading (``share`` of it, by speed), the
+    sideways slip of ``turned`` rad of turn, a random walk on the velocities
+    (``accel_share`` of it)."""
+    pos = share * cfg.pos_process_sd**2 * dt + cfg.turn_slip_sd**2 * abs(turned)
     return np.diag(
         [
-            share * cfg.pos_process_sd**2 * dt,
-            share * cfg.pos_process_sd**2 * dt,
+            pos,
+            pos,
             share * cfg.yaw_process_sd**2 * dt,
             accel_share * cfg.accel_sd**2 * dt,
             accel_share * cfg.yaw_accel_sd**2 * dt,
