@@ -11,9 +11,12 @@ cross-track error that pure pursuit then takes metres to close.
 A MEMS gyro measures the body's rate directly, at the price of a bias of a few
 mrad/s that changes from one power-on to the next. Every time the robot stands (the
 filter's zero-velocity updates say so) the gyro's reading *is* that bias, so it is
-averaged there (``bias_tau_s``), and the rate is fused only once ``min_still_samples``
-have been seen: an unknown bias of 0.005 rad/s fused through a minute of driving
-would turn the heading by a quarter of a degree a minute against the compass.
+averaged there (``bias_tau_s``). Until then, and as far as the standing has not
+pinned it, the bias is an uncertainty on top of each sample's noise
+(``unknown_bias_sd``): in a turn, where the wheels' rate is off by 5-20 % of it, the
+gyro still wins, so a robot that drives off at once (or a navigation restarted while
+driving) turns by its gyro from the first corner; on a straight line, where a bias
+would turn the heading slowly against the compass, the wheels do.
 
 While the gyro's rate is fresh it stands in for the wheels' in each odometry
 update (robot_localization users do the same: the odometry's ``vyaw`` off, the
@@ -28,7 +31,6 @@ and the gyro's are weighted by their variances.
 from __future__ import annotations
 
 import math
-from typing import Annotated
 
 import msgspec
 
@@ -46,8 +48,10 @@ class GyroConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     bias_tau_s: Positive = 30.0
     """The standing average's time constant (s): long against the noise, short against
     the bias's drift with the unit's temperature over a field day."""
-    min_still_samples: Annotated[int, msgspec.Meta(ge=1)] = 20
-    """Standing samples before the bias counts as known."""
+    unknown_bias_sd: Positive = 0.005
+    """The bias's 1-sigma before the robot has stood (rad/s; a few mrad/s from one
+    power-on to the next for UM7-class MEMS gyros); each standing sample narrows it, as
+    a mean of samples of ``sd`` (at most ``bias_tau_s`` worth)."""
     max_rate: Positive = 4.0
     """A reading beyond it (rad/s) is refused as absurd (the Husky turns at 2 rad/s at
     most)."""
@@ -68,8 +72,11 @@ class Gyro:
         self._interval = 0.1  # between two samples (s), as they come
 
     @property
-    def ready(self) -> bool:
-        return self.cfg.enabled and self.still_samples >= self.cfg.min_still_samples
+    def bias_var(self) -> float:
+        """The variance of the bias taken off each rate ((rad/s)²): the prior narrowed by
+        the standing samples averaged into it."""
+        n = min(float(self.still_samples), self.cfg.bias_tau_s / self._interval)
+        return 1.0 / (1.0 / self.cfg.unknown_bias_sd**2 + n / self.cfg.sd**2)
 
     def sample(self, t: float, wz: float, still: bool) -> None:
         """One reading ``wz`` (rad/s) at ``t``: learnt from while ``still``, else kept
@@ -89,7 +96,7 @@ class Gyro:
             k = max(1.0 / n, 1.0 - math.exp(-dt / self.cfg.bias_tau_s))
             self.bias += k * (wz - self.bias)
             self._rate = None
-        elif self.ready:
+        else:
             self._rate = (t, wz - self.bias)
 
     def odometry_rate(
@@ -99,10 +106,12 @@ class Gyro:
         wheels say ``w`` (rad/s) with ``var_w``, ``interval`` seconds after the one
         before: while the gyro's last rate is fresh, the two weighted by their
         variances (the gyro's wins in a turn, where the wheels scrub; the wheels' at a
-        creep, below the gyro's noise), else the wheels' alone."""
+        creep, below the gyro's noise), else the wheels' alone. The gyro's variance is
+        its noise's (a sample used for several updates weighs as one) and its bias's,
+        which is the same in every update and so is not divided among them."""
         if self._rate is None or not 0.0 <= t - self._rate[0] <= self.cfg.max_age_s:
             return w, var_w
-        var_g = self.cfg.sd**2 * max(1.0, self._interval / max(interval, 1e-3))
+        var_g = self.cfg.sd**2 * max(1.0, self._interval / max(interval, 1e-3)) + self.bias_var
         var_w = max(var_w, 1e-12)
         var = 1.0 / (1.0 / var_w + 1.0 / var_g)
         return var * (w / var_w + self._rate[1] / var_g), var
