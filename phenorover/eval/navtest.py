@@ -17,17 +17,19 @@ from typing import Any
 import numpy as np
 import tomli_w
 
+from common import keys
 from common.config import load_manifest
 from common.field import load_field
 from common.messages.nav import (
     Leg,
     NavState,
 )
+from common.messages.sim import SimRun
 from common.process import free_loopback_port
 from common.transport import Bus
 from phenorover.eval import experiments as ex
 from phenorover.eval import profiles
-from phenorover.eval.nav_recorder import Recorder, follow
+from phenorover.eval.nav_recorder import Recorder, Release, follow
 from phenorover.eval.navtest_stationary import stationary
 
 SERVICES = ("sim", "base", "gnss", "nav")
@@ -42,6 +44,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None, help="output folder (runs/nav-EXPERIMENT)")
     p.add_argument("--seed", type=int, default=None, help="the world's and receivers' seed")
     p.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="run the world in lockstep with the services, held until the route is sent: "
+        "the same seed gives the same run under any load (--rtf is then its cap)",
+    )
+    p.add_argument(
         "--profile",
         choices=sorted(profiles.PROFILES),
         default="ours",
@@ -50,12 +58,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _manifest(
-    src: Path, rtf: float, out: Path, seed: int | None = None, profile: str = "ours"
+    src: Path,
+    rtf: float,
+    out: Path,
+    seed: int | None = None,
+    profile: str = "ours",
+    lockstep: bool = False,
 ) -> Path:
     with src.open("rb") as f:
         m: dict[str, Any] = profiles.apply(tomllib.load(f), profile)
     if seed is not None:
         m = profiles.seeded(m, seed)
+    if lockstep:
+        m["lockstep"] = True
     m["services"] = {k: v for k, v in m["services"].items() if k in SERVICES}
     m["services"].setdefault("sim", {})["real_time_factor"] = rtf
     # a private router port, so an experiment runs beside a deployment that is up
@@ -101,8 +116,11 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out or Path("runs") / f"nav-{args.experiment}"
     out.mkdir(parents=True, exist_ok=True)
-    manifest = _manifest(args.manifest, args.rtf, out, args.seed, args.profile)
-    launcher = Launcher(manifest)
+    manifest = _manifest(args.manifest, args.rtf, out, args.seed, args.profile, args.lockstep)
+    # in lockstep the world is held until the route is sent (nav then waits to be
+    # localized on the world's time, not on this process's): the same seed, the same run
+    held = load_manifest(manifest).lockstep
+    launcher = Launcher(manifest, extra_args={"sim": ["--set", "start_held=true"]} if held else {})
     with launcher, open_client(manifest, []) as session:
         bus = Bus(session, "nav-test")
         try:
@@ -111,12 +129,13 @@ def run(args: argparse.Namespace) -> int:
                 return 1
             rec = Recorder(bus)
             t0 = time.monotonic()
-            while not (rec.poses and rec.poses[-1].localized):
+            while not held and not (rec.poses and rec.poses[-1].localized):
                 if time.monotonic() - t0 > 120:
                     print("nav-test: never localized", file=sys.stderr)
                     return 1
                 time.sleep(0.2)
-            stats = _experiment(args, bus, rec, out)
+            release = (lambda: bus.call(keys.SIM_RUN, SimRun(), timeout=10)) if held else None
+            stats = _experiment(args, bus, rec, out, release)
         finally:
             bus.close()
     # the models in force are those of the effective manifest beside this file (the
@@ -134,10 +153,12 @@ def add_command(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)
 
 
-def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) -> dict[str, Any]:
+def _experiment(
+    args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path, release: Release
+) -> dict[str, Any]:
     _, fld = load_field(load_manifest(args.manifest).field)
     if args.experiment == "stationary":
-        return stationary(args, bus, rec, out, fld)
+        return stationary(args, bus, rec, out, fld, release)
     pts = (
         ex.border_points(fld)
         if args.experiment == "border"
@@ -145,13 +166,11 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
     )
     legs = ex.legs_through(pts)
     length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
-    state = follow(bus, rec, legs, args.experiment, timeout=60 + 20 * length / args.rtf)
-    with rec.lock:
-        rows = [
-            (t, p)
-            for t, p in rec.truth
-            if p is not None and p.route_id == args.experiment and p.state == NavState.DRIVING
-        ]
+    state = follow(
+        bus, rec, legs, args.experiment, timeout=60 + 20 * length / args.rtf, release=release
+    )
+    route = rec.paired(args.experiment)
+    rows = [(t, p) for t, p in route if p.state == NavState.DRIVING]
     xy = np.array([[t.x, t.y] for t, _ in rows])
     yaw = np.array([t.yaw for t, _ in rows])
     legi = np.array([p.leg for _, p in rows], dtype=np.int64)
@@ -163,7 +182,6 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
     # the samples themselves, for a look at where along the route the errors lie
     with rec.lock:
         est = np.array([[p.stamp_ns / 1e9, p.x, p.y, p.yaw] for p in rec.poses])
-        route = [(t, p) for t, p in rec.truth if p is not None and p.route_id == args.experiment]
     np.savez_compressed(
         out / "track.npz",
         t=ts,
@@ -179,10 +197,7 @@ def _experiment(args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path) ->
         states=np.array([p.state.value for _, p in route]),
     )
     _figures(out, xy, xte, ts, herr, legs, args.experiment)
-    with rec.lock:  # the distance driven, measured: the true path over the whole route
-        path = np.array(
-            [[t.x, t.y] for t, p in rec.truth if p is not None and p.route_id == args.experiment]
-        )
+    path = np.array([[t.x, t.y] for t, _ in route])  # the distance driven: the true path
     return {
         "experiment": args.experiment,
         "result": state.value,

@@ -15,11 +15,11 @@ import numpy as np
 from common.messages.nav import PoseEstimate
 from common.transport import Bus
 from phenorover.eval import experiments as ex
-from phenorover.eval.nav_recorder import Recorder, follow
+from phenorover.eval.nav_recorder import Recorder, Release, follow
 
 
 def stationary(
-    args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path, fld: Any
+    args: argparse.Namespace, bus: Bus, rec: Recorder, out: Path, fld: Any, release: Release
 ) -> dict[str, Any]:
     ox, oy = float(fld.origin_xy[0]), float(fld.origin_xy[1])
     goal = (float(fld.cross_lanes_x[-2]), float(fld.row_lanes_y[1]))
@@ -28,15 +28,17 @@ def stationary(
     # the last leg ends as the mission's legs to a scan location do: without a
     # planned heading (services/planner/waypoints.py), the robot holds the leg's
     legs = ex.legs_through([(ox, oy), (goal[0], oy), goal])
-    follow(bus, rec, legs, "stationary", timeout=600)
-    with rec.lock:
-        n_pose, n_truth = len(rec.poses), len(rec.truth)
-    t_start = rec.poses[-1].stamp_ns
-    while (rec.poses[-1].stamp_ns - t_start) / 1e9 < args.hold:
+    follow(bus, rec, legs, "stationary", timeout=600, release=release)
+    # the hold: from the route's end for ``hold`` seconds of sim time, by the stamps
+    # (in lockstep the same seed then holds over the same samples)
+    end = rec.paired("stationary")
+    t0 = end[-1][1].stamp_ns if end else rec.poses[-1].stamp_ns
+    t1 = t0 + int(args.hold * 1e9)
+    while rec.poses[-1].stamp_ns < t1:
         time.sleep(0.5)
     with rec.lock:
-        poses = rec.poses[n_pose:]
-        truths = [t for t, _ in rec.truth[n_truth:]]
+        poses = [p for p in rec.poses if t0 < p.stamp_ns <= t1]
+        truths = [t for t in rec.truth if t0 < t.stamp_ns <= t1]
     g = (goal[0], goal[1], goal_yaw)
     est = ex.stationary_stats(
         np.array([[p.x, p.y] for p in poses]), np.array([p.yaw for p in poses]), g
