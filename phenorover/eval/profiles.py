@@ -53,6 +53,7 @@ PROFILES: dict[str, dict[str, dict[str, Any]]] = {
                 "lookahead_m": 1.0,
                 "final_lookahead_m": 1.0,
                 "align_tolerance_deg": 2.0,
+                "turn_hold_gain": 0.0,  # turns strictly in place
                 "fine": False,
                 # the paper states no driving speed; the calibration assumed 0.5 m/s
                 "max_speed": 0.5,

@@ -180,14 +180,18 @@ class Filter:
     def _correlation_scale(self, kind: str, t: float) -> float:
         """How much to scale the variance of a GNSS measurement of ``kind`` stamped
         ``t``: 1 + 2 tau / interval for a robot that stands or creeps, fading to 1 at
-        full speed, where the process noise already keeps the filter from averaging
-        more than a few correlated fixes."""
+        full speed, where the position's process noise already keeps the filter from
+        averaging more than a few correlated fixes; the compass's heading always."""
         last, self._last_t[kind] = self._last_t.get(kind), t
         tau = self.cfg.gnss_correlation_s
         if last is None or tau <= 0:
             return 1.0
         x = self.x
-        slow = 1.0 - motion_share(self.cfg, float(x[3]), float(x[4]))
+        # the compass at any speed: the heading's process noise is the gyro's, small,
+        # so the filter averages tens of its fixes while driving too (each pulled it
+        # by its own error, a degree under the crop, as if independent)
+        moving = motion_share(self.cfg, float(x[3]), float(x[4]))
+        slow = 1.0 if kind == "heading" else 1.0 - moving
         return 1.0 + slow * 2.0 * tau / min(max(t - last, 0.01), 1.0)
 
     def _lag(self, t: float) -> float:

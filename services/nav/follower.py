@@ -26,6 +26,7 @@ from services.nav.pursuit import (
     ramp,
     segment_distance,
 )
+from services.nav.turns import line_hold, turn_rate
 
 __all__ = ["Command", "Follower", "FollowerConfig", "Phase"]
 
@@ -107,11 +108,7 @@ class Follower:
         )
 
     def _rotate(self, err: float, dt: float) -> float:
-        """The turn rate toward a heading ``err`` rad away (see FollowerConfig)."""
-        c = self.cfg
-        brake = math.sqrt(2.0 * c.turn_braking * c.max_turn_accel * abs(err))
-        w = max(c.min_turn_rate, min(c.max_turn_rate, c.rotate_gain * abs(err), brake))
-        return ramp(math.copysign(w, err), self._w, c.max_turn_accel, dt)
+        return turn_rate(err, self._w, self.cfg, dt)
 
     def _remaining(self, x: float, y: float) -> float:
         leg = self.legs[self.leg]
@@ -177,14 +174,16 @@ class Follower:
         return Command(v, w, state, self.leg, k.togo, k.xte, k.herr, event, why)
 
     def _align(self, k: Tick) -> Command | None:
-        """Turn in place toward the leg's look-ahead point, then drive."""
+        """Turn toward the leg's look-ahead point, held on its line, then drive."""
         aim = wrap_angle(k.yaw - aim_at(k.x, k.y, k.leg, self.cfg.lookahead_m))
         if k.leg.length <= self.cfg.goal_tolerance_m or abs(aim) <= math.radians(
             self.cfg.align_tolerance_deg
         ):
             self.phase = Phase.DRIVE
             return None
-        return self._out(k, 0.0, self._rotate(-aim, k.dt), NavState.ROTATING)
+        v = line_hold(k.xte, k.herr, self.cfg)
+        v = ramp(0.0 if k.obstacle and v > 0 else v, self._v, self.cfg.max_accel, k.dt)
+        return self._out(k, v, self._rotate(-aim, k.dt), NavState.ROTATING)
 
     def _backup(self, k: Tick) -> Command | None:
         """Back up along the leg to come in again (the fine phase's re-approach)."""

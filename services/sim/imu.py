@@ -14,8 +14,11 @@ and roll +-1 deg static and +-3 deg dynamic, read as bounds):
   filter rejects part of it, ``accel_leak`` = 0.5 gets through (at the Husky's
   1 m/s^2 that is about 3 deg, the dynamic bound);
 - the gyroscope: ``gyro_noise_sd`` = 0.01 rad/s white and a per-run bias of
-  ``gyro_bias_sd`` = 0.005 rad/s per axis; yaw (magnetometer) off by
-  ``yaw_sd_deg`` = 5 deg per run, since a magnetometer beside the motors is.
+  ``gyro_bias_sd`` = 0.005 rad/s per axis, on the mean rate since the last reading
+  (what a rate gyro's anti-alias filter passes; the body's rate within one physics
+  step carries the turn's slip noise, white per step, which no gyro samples); yaw
+  (magnetometer) off by ``yaw_sd_deg`` = 5 deg per run, since a magnetometer beside
+  the motors is.
 
 The noise comes from a generator of its own (seeded from the world's seed), so adding
 or tuning the IMU never changes the world's other random draws, the truth included.
@@ -87,7 +90,8 @@ class ImuModel:
         a_long = (s.v - prev.v) / dt if dt > 0 else 0.0
         a_lat = s.v * s.w  # centripetal, towards the turn's centre (+y turning left)
         d_roll, d_pitch = wrap_angle(s.roll - prev.roll), wrap_angle(s.pitch - prev.pitch)
-        rate = (float(d_roll) / dt, float(d_pitch) / dt) if dt > 0 else (0.0, 0.0)
+        d_yaw = float(wrap_angle(s.yaw - prev.yaw))
+        rate = (float(d_roll) / dt, float(d_pitch) / dt, d_yaw / dt) if dt > 0 else (0, 0, s.w)
         # the unit's own frame, turned by its mounting on base_link
         t_roll, t_pitch, t_yaw = euler_zyx(rot_zyx(s.roll, s.pitch, s.yaw) @ self._mount)
         sp, cp = math.sin(t_pitch), math.cos(t_pitch)
@@ -105,7 +109,7 @@ class ImuModel:
             yaw=float(wrap_angle(t_yaw + self.yaw_bias)),
             wx=rate[0] + float(g[0]),
             wy=rate[1] + float(g[1]),
-            wz=s.w + float(g[2]),
+            wz=rate[2] + float(g[2]),
             # the specific force: acceleration less gravity, in the body frame
             ax=a_long - G * sp,
             ay=a_lat + G * cp * sr,

@@ -76,11 +76,18 @@ BY_CONSTRUCTION = (
 
 
 def run_experiment(
-    exp: str, rtf: float, out: Path, profile: str = "ours", seed: int | None = None
+    exp: str,
+    rtf: float,
+    out: Path,
+    profile: str = "ours",
+    seed: int | None = None,
+    lockstep: bool = False,
 ) -> tuple[dict[str, Any] | None, str]:
-    """The experiment's stats.json, or None and why it failed."""
+    """The experiment's stats.json, or None and why it failed. ``lockstep``: the world
+    in lockstep with the services (``rtf`` its cap), so a seed gives the same run."""
     cmd = [sys.executable, "-m", "phenorover", "--log-level", "warning", "nav-test", exp]
     cmd += ["--rtf", str(rtf), "--out", str(out), "--profile", profile]
+    cmd += ["--lockstep"] if lockstep else []
     if seed is not None:
         cmd += ["--seed", str(seed)]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=REPO)

@@ -9,11 +9,14 @@ figure (the simulator as hard as the field); ours at most 0.6 x the baseline's m
 cross-track error; ours' true stop within 1.0 cm of the plan.
 
     python tests/bench/bench_profiles.py [--json OUT] [--seeds 1 2 3] [--runs 1]
-        [--rtf 10] [--experiments border serpentine stationary] [--keep]
+        [--rtf 1000] [--free] [--experiments border serpentine stationary] [--keep]
 
-``--runs N`` runs each seed N times: a simulated run is not repeatable to the
-millimetre (the world is not in lockstep with the services), so a figure is the mean
-of the seeds' means, and its note says how far runs of one seed differ.
+Each run is in lockstep (``nav-test --lockstep``): the world waits for the services
+at every step, as fast as the machine goes (``--rtf`` caps it), so a seed gives the
+same run under any load. ``--free`` runs the world beside the services at ``--rtf``
+instead, where runs of one seed differ by millimetres: ``--runs N`` then runs each
+seed N times, a figure is the mean of the seeds' means, and its note says how far
+runs of one seed differ.
 
 ``--keep`` carries the figures and runs of the experiments not run from the
 ``--json`` file (each figure keeps its own date and commit), so one experiment can be
@@ -87,10 +90,9 @@ METRICS = (
 )
 # what would close a calibration figure that misses, by experiment
 TRACK_CALIBRATE = (
-    "runs of one seed differ by several millimetres (the simulated world is not in "
-    "lockstep with the services, docs/simulation.md#calibration): more runs per seed "
-    "(--runs) narrow the mean; a miss that stays is the error models (RTK under the "
-    "crop, the southern paths' loose ground), to be set again and every figure re-run"
+    "the error models (RTK under the crop, the southern paths' loose ground, "
+    "docs/simulation.md#calibration), to be set again and every figure re-run; "
+    "more seeds narrow the mean"
 )
 CALIBRATE = {
     "border": TRACK_CALIBRATE,
@@ -125,9 +127,10 @@ def main() -> int:
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument(
-        "--runs", type=int, default=1, help="runs of each seed (a run is not repeatable)"
+        "--runs", type=int, default=1, help="runs of each seed (with --free: not repeatable)"
     )
-    ap.add_argument("--rtf", type=float, default=10.0)
+    ap.add_argument("--rtf", type=float, default=1000.0, help="the world's pace (in lockstep: cap)")
+    ap.add_argument("--free", action="store_true", help="the world beside the services")
     ap.add_argument("--experiments", nargs="+", choices=EXPERIMENTS, default=list(EXPERIMENTS))
     ap.add_argument(
         "--keep",
@@ -153,7 +156,9 @@ def main() -> int:
             for profile in PROFILES:
                 for seed, run in itertools.product(args.seeds, range(1, args.runs + 1)):
                     out = Path(d) / f"{exp}-{profile}-{seed}-{run}"
-                    stats, why = run_experiment(exp, args.rtf, out, profile, seed)
+                    stats, why = run_experiment(
+                        exp, args.rtf, out, profile, seed, lockstep=not args.free
+                    )
                     name = f"{exp} {profile} seed {seed}" + (f" run {run}" if args.runs > 1 else "")
                     print(f"{name}: {why or json.dumps(stats)}", flush=True)
                     if why:
@@ -219,7 +224,12 @@ def main() -> int:
                 ),
                 headline=True,
             )
-    details = {"seeds": args.seeds, "runs_per_seed": per_seed, "runs": runs}
+    details = {
+        "seeds": args.seeds,
+        "runs_per_seed": per_seed,
+        "runs": runs,
+        "lockstep": not args.free,
+    }
     return bench.finish(args.json, details)
 
 

@@ -234,20 +234,20 @@ def test_the_fine_phase_reads_the_worse_axis_and_an_unknown_covariance_as_infini
     assert pose_sds(cov) == (math.inf, math.inf)
 
 
-def test_a_leg_started_beside_its_line_is_back_on_it_within_a_metre_at_speed() -> None:
-    """A corner's turn in place left the robot 8 cm beside the next leg: it turns
-    toward the line, not along it, and at 0.5 m/s behind a lagging drivetrain is back
-    within a centimetre after a metre of the leg, without overshooting by more."""
-    cfg = FollowerConfig()
+def start_beside_the_line(cfg: FollowerConfig) -> tuple[float, float, list[float], NavState]:
+    """A corner's turn in place left the robot 8 cm beside the next leg, facing across
+    it; driven behind a lagging drivetrain. Its offset and heading as it starts
+    driving the leg, its offsets after a metre of it, and how the route ended."""
     f = Follower(cfg)
     f.start("side", [Leg(x0=0, y0=0, x1=5, y1=0)])
     x, y, yaw, v, w = 0.0, 0.08, math.pi / 2, 0.0, 0.0
     dt, tau = 0.05, 0.15
-    first_drive_yaw, after_a_metre = None, []
+    first: tuple[float, float] | None = None
+    after_a_metre = []
     for k in range(int(60 / dt)):
         c = f.step(k * dt, x, y, yaw, True, False)
-        if c.state == NavState.DRIVING and first_drive_yaw is None:
-            first_drive_yaw = yaw
+        if c.state == NavState.DRIVING and first is None:
+            first = (y, yaw)
         if x > 1.0 and c.state == NavState.DRIVING:
             after_a_metre.append(abs(y))
         if c.event:
@@ -257,9 +257,20 @@ def test_a_leg_started_beside_its_line_is_back_on_it_within_a_metre_at_speed() -
         x += v * dt * math.cos(yaw)
         y += v * dt * math.sin(yaw)
         yaw = wrap_angle(yaw + w * dt)
-    assert first_drive_yaw is not None and math.degrees(first_drive_yaw) < -5.0
-    assert after_a_metre and max(after_a_metre) < 0.01
-    assert f.state == NavState.ARRIVED
+    assert first is not None
+    return first[0], first[1], after_a_metre, f.state
+
+
+def test_a_leg_started_beside_its_line_is_back_on_it_within_a_metre_at_speed() -> None:
+    """Turning onto the leg, the robot drives along its heading toward the line, so
+    it starts the leg on it; turning strictly in place, it turns toward the line, not
+    along it, and at 0.5 m/s is back within a centimetre after a metre of the leg,
+    without overshooting by more."""
+    y0, _, after, state = start_beside_the_line(FollowerConfig())
+    assert abs(y0) < 0.01 and max(after) < 0.01 and state == NavState.ARRIVED
+    y0, yaw0, after, state = start_beside_the_line(FollowerConfig(turn_hold_gain=0.0))
+    assert y0 > 0.07 and math.degrees(yaw0) < -5.0
+    assert max(after) < 0.01 and state == NavState.ARRIVED
 
 
 def rotating_seconds(cfg: FollowerConfig) -> float:
