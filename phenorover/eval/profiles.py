@@ -11,7 +11,8 @@ method of arXiv:2404.04404 (sections 4.3-4.4), our baseline:
   the wheels alone;
 - pure pursuit with a 1 m look-ahead to the end, at 0.5 m/s (the paper states no
   speed: our assumption, which the calibration was made with), driving off a
-  corner once within its 2 deg heading tolerance, no fine positioning;
+  corner once within its 2 deg heading tolerance, turning strictly in place, no
+  fine positioning;
 - the scan placed with the mean of the estimates over it (the filter forgets while
   standing), where ours takes the estimate at its end;
 - a scan wherever the robot stopped (the paper has no arrival check; ours, 5 cm
