@@ -19,7 +19,7 @@ from common.client import (
     open_client,
     wait_alive,
 )
-from common.config import ConfigError, load_manifest
+from common.config import ConfigError
 from common.service_args import setup_logging
 from common.status import format_table, query_alive
 from phenorover.cpu import CpuUse, Mark
@@ -103,21 +103,17 @@ def cmd_sim(args: argparse.Namespace) -> int:
     (each named with the reason), 2 on a bad manifest or field, found before anything
     starts (:func:`phenorover.preflight.preflight`, with the field given)."""
     from common import keys
-    from common.messages.sim import SimRun
     from common.transport import Bus
     from phenorover.eval.truth_view import beside
-    from phenorover.launcher import Launcher
+    from phenorover.launcher import Launcher, held_world, release_world
     from services.mission.cli import run_survey
 
     field = args.field or None
     if field and Path(field).exists():  # one file for every service, whatever its cwd
         field = str(Path(field).resolve())
     try:
-        # in lockstep the world is held until the survey has started: the same seed
-        # then gives the same survey
-        held = (
-            {"sim": ["--set", "start_held=true"]} if load_manifest(args.manifest).lockstep else {}
-        )
+        # in lockstep the world is held until the survey has started
+        held = held_world(args.manifest)
         launcher = Launcher(args.manifest, field=field, extra_args=held)
     except ConfigError as exc:
         print(f"phenorover sim: {exc}", file=sys.stderr)
@@ -146,7 +142,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
         problems: list[str] = []
         clock = bus.latest(keys.SIM_CLOCK)
         try:
-            release = (lambda: bus.call(keys.SIM_RUN, SimRun(), timeout=10)) if held else None
+            release = (lambda: release_world(bus)) if held else None
             start = _mark(launcher, clock)
             final = run_survey(bus, field, args.survey_timeout, problems, args.new, release)
             if final is not None:

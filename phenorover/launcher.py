@@ -34,7 +34,9 @@ import zenoh
 from common import keys
 from common.acl_log import DenialLog
 from common.config import ConfigError
+from common.messages.sim import SimRun
 from common.process import die_with_parent
+from common.transport import Bus
 from phenorover.cpu import cpu_seconds
 from phenorover.preflight import config_type as config_type  # re-exported: tests, tools
 from phenorover.preflight import preflight
@@ -239,6 +241,21 @@ class Launcher:
 
     def __exit__(self, *exc: Any) -> None:
         self.stop()
+
+
+def held_world(manifest: Path) -> dict[str, list[str]]:
+    """The simulator's extra arguments (a Launcher's ``extra_args``) for a deployment
+    in lockstep: its world stands at its start until :func:`release_world`, so that
+    whoever starts a survey or an experiment does so first and the same seed gives the
+    same run; none for a free-running one. Raises ConfigError for a bad manifest."""
+    from common.config import load_manifest
+
+    return {"sim": ["--set", "start_held=true"]} if load_manifest(manifest).lockstep else {}
+
+
+def release_world(bus: Bus) -> None:
+    """Let a world held at its start run (``rpc/sim/run``). Raises RpcError."""
+    bus.call(keys.SIM_RUN, SimRun(), timeout=10)
 
 
 def up(manifest_path: Path) -> int:

@@ -19,6 +19,16 @@ LEASE_S = 3600.0  # the longest a route may be leased for (FollowRoute.lease_s)
 
 
 Release = Callable[[], object] | None  # lets a held world run (lockstep), if any
+# the slowest a world in lockstep is taken to go (x real time), for deadlines: the
+# border experiment ran 190 s of sim time in 38 s of wall time, start-up included,
+# and the serpentine about 5x
+LOCKSTEP_PACE = 4.0
+
+
+def pace(rtf: float, release: Release) -> float:
+    """The world's pace (x real time) to set a wall-time deadline by: ``rtf``, which in
+    lockstep (``release`` given) is only a cap."""
+    return min(rtf, LOCKSTEP_PACE) if release is not None else rtf
 
 
 class Recorder:

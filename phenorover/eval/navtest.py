@@ -17,27 +17,20 @@ from typing import Any
 import numpy as np
 import tomli_w
 
-from common import keys
 from common.config import load_manifest
 from common.field import load_field
 from common.messages.nav import (
     Leg,
     NavState,
 )
-from common.messages.sim import SimRun
 from common.process import free_loopback_port
 from common.transport import Bus
 from phenorover.eval import experiments as ex
 from phenorover.eval import profiles
-from phenorover.eval.nav_recorder import Recorder, Release, follow
+from phenorover.eval.nav_recorder import Recorder, Release, follow, pace
 from phenorover.eval.navtest_stationary import stationary
 
 SERVICES = ("sim", "base", "gnss", "nav")
-
-
-# the slowest a world in lockstep is taken to go (x real time), for the route's timeout:
-# about 8x on two cores with every service in step
-LOCKSTEP_PACE = 4.0
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -117,15 +110,15 @@ def _figures(
 
 def run(args: argparse.Namespace) -> int:
     from common.client import open_client, wait_alive
-    from phenorover.launcher import Launcher
+    from phenorover.launcher import Launcher, held_world, release_world
 
     out = args.out or Path("runs") / f"nav-{args.experiment}"
     out.mkdir(parents=True, exist_ok=True)
     manifest = _manifest(args.manifest, args.rtf, out, args.seed, args.profile, args.lockstep)
     # in lockstep the world is held until the route is sent (nav then waits to be
     # localized on the world's time, not on this process's): the same seed, the same run
-    held = load_manifest(manifest).lockstep
-    launcher = Launcher(manifest, extra_args={"sim": ["--set", "start_held=true"]} if held else {})
+    held = held_world(manifest)
+    launcher = Launcher(manifest, extra_args=held)
     with launcher, open_client(manifest, []) as session:
         bus = Bus(session, "nav-test")
         try:
@@ -139,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                     print("nav-test: never localized", file=sys.stderr)
                     return 1
                 time.sleep(0.2)
-            release = (lambda: bus.call(keys.SIM_RUN, SimRun(), timeout=10)) if held else None
+            release = (lambda: release_world(bus)) if held else None
             stats = _experiment(args, bus, rec, out, release)
         finally:
             bus.close()
@@ -171,11 +164,8 @@ def _experiment(
     )
     legs = ex.legs_through(pts)
     length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
-    # in lockstep --rtf is only a cap: the world goes as fast as the machine lets it
-    pace = min(args.rtf, LOCKSTEP_PACE) if release is not None else args.rtf
-    state = follow(
-        bus, rec, legs, args.experiment, timeout=60 + 20 * length / pace, release=release
-    )
+    timeout = 60 + 20 * length / pace(args.rtf, release)
+    state = follow(bus, rec, legs, args.experiment, timeout=timeout, release=release)
     route = rec.paired(args.experiment)
     rows = [(t, p) for t, p in route if p.state == NavState.DRIVING]
     xy = np.array([[t.x, t.y] for t, _ in rows])

@@ -15,7 +15,7 @@ import numpy as np
 from common.messages.nav import PoseEstimate
 from common.transport import Bus
 from phenorover.eval import experiments as ex
-from phenorover.eval.nav_recorder import Recorder, Release, follow
+from phenorover.eval.nav_recorder import Recorder, Release, follow, pace
 
 
 def stationary(
@@ -34,7 +34,10 @@ def stationary(
     end = rec.paired("stationary")
     t0 = end[-1][1].stamp_ns if end else rec.poses[-1].stamp_ns
     t1 = t0 + int(args.hold * 1e9)
+    deadline = time.monotonic() + 60 + args.hold / pace(args.rtf, release)
     while rec.poses[-1].stamp_ns < t1:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"the hold of {args.hold:.0f} s not over by its deadline")
         time.sleep(0.5)
     with rec.lock:
         poses = [p for p in rec.poses if t0 < p.stamp_ns <= t1]

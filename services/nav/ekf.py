@@ -119,7 +119,7 @@ class Localizer(Filter):
         var, bad = check_height(z, var, self.cfg.min_fix_sd_m)
         if not self._admit("height", t, bad):
             return False
-        scaled = var * self._correlation_scale("height", t)
+        scaled = var * self._correlation_scale("height", t, position=True)
         gate = CHI2_999[1] if self.cfg.gate else None
         done = self.height.update(z, var, scaled, gate, self.cfg.reset_after)
         if done == "gate":

@@ -56,7 +56,7 @@ class EkfConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     compass's headings are scaled so at any speed: the heading's process noise is
     small (the gyro carries it), so the filter averages many of them while driving
     too, and taken as independent they steered the robot by their correlated error
-    (a degree under the crop is a centimetre of cross-track at pure pursuit's 0.4 m
+    (a degree under the crop is 7 mm of cross-track at pure pursuit's 0.4 m
     look-ahead). 0 turns the correction off."""
     z_process_sd: Positive = 0.05
     """base_link's height: a random walk (m/sqrt(s), at full speed; the terrain's bumps

@@ -177,21 +177,19 @@ class Filter:
         self._p = f @ self._p @ f.T + q
         self.height.var += share * self.cfg.z_process_sd**2 * dt
 
-    def _correlation_scale(self, kind: str, t: float) -> float:
+    def _correlation_scale(self, kind: str, t: float, position: bool) -> float:
         """How much to scale the variance of a GNSS measurement of ``kind`` stamped
-        ``t``: 1 + 2 tau / interval for a robot that stands or creeps, fading to 1 at
-        full speed, where the position's process noise already keeps the filter from
-        averaging more than a few correlated fixes; the compass's heading always."""
+        ``t``: 1 + 2 tau / interval. For a measurement of the ``position`` it fades to
+        1 toward full speed, where the position's process noise already keeps the
+        filter from averaging more than a few correlated fixes; the heading's process
+        noise is the gyro's, small, so the filter averages tens of compass fixes while
+        driving too, and the scaling holds at any speed."""
         last, self._last_t[kind] = self._last_t.get(kind), t
         tau = self.cfg.gnss_correlation_s
         if last is None or tau <= 0:
             return 1.0
         x = self.x
-        # the compass at any speed: the heading's process noise is the gyro's, small,
-        # so the filter averages tens of its fixes while driving too (each pulled it
-        # by its own error, a degree under the crop, as if independent)
-        moving = motion_share(self.cfg, float(x[3]), float(x[4]))
-        slow = 1.0 if kind == "heading" else 1.0 - moving
+        slow = 1.0 - motion_share(self.cfg, float(x[3]), float(x[4])) if position else 1.0
         return 1.0 + slow * 2.0 * tau / min(max(t - last, 0.01), 1.0)
 
     def _lag(self, t: float) -> float:
@@ -228,7 +226,7 @@ class Filter:
         if not math.isfinite(d2):
             return self._refuse("invalid", f"{kind}: innovation {innov} is not usable")
         if kind != "odometry":
-            r = r * self._correlation_scale(kind, t)
+            r = r * self._correlation_scale(kind, t, position=bool({0, 1} & set(direct)))
         run = self._runs.setdefault(kind, ConsistentRun())
         gate = CHI2_999[len(z)]
         if self.cfg.gate and self.initialized and d2 > gate:

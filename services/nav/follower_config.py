@@ -16,11 +16,10 @@ class FollowerConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_f
     ``align_tolerance_deg`` 0.5 leaves it little heading error to drive off with.
     ``lookahead_m`` 0.4: pure pursuit holds a heading error of the estimate as a
     sideways offset of look-ahead times that error, and closes the slip of the soil
-    over a look-ahead or two of travel; on the border experiment in lockstep (seeds
-    1-3, 0.5 m/s) 0.6, 0.5, 0.4 and 0.3 m gave 1.81, 1.67, 1.60 and 1.65 cm of mean
-    true cross-track error. Cruise at ``max_speed`` 0.5 m/s, the paper's method's own
-    speed: accuracy is won by control (the turn held on the line, the pose predicted
-    over the drivetrain's lag), not by crawling.
+    over a look-ahead or two of travel; a shorter one steers on the position's
+    noise. Cruise at ``max_speed`` 0.5 m/s, the paper's method's own speed: accuracy
+    is won by control (the turn held on the line, the pose predicted over the
+    drivetrain's lag), not by crawling.
 
     At a scan location what counts is that the robot stands still while the scanner
     runs and that its pose over the scan is known (the estimate averages the fixes

@@ -91,7 +91,7 @@ class ImuModel:
         a_lat = s.v * s.w  # centripetal, towards the turn's centre (+y turning left)
         d_roll, d_pitch = wrap_angle(s.roll - prev.roll), wrap_angle(s.pitch - prev.pitch)
         d_yaw = float(wrap_angle(s.yaw - prev.yaw))
-        rate = (float(d_roll) / dt, float(d_pitch) / dt, d_yaw / dt) if dt > 0 else (0, 0, s.w)
+        rate = (float(d_roll) / dt, float(d_pitch) / dt, d_yaw / dt) if dt > 0 else (0.0, 0.0, s.w)
         # the unit's own frame, turned by its mounting on base_link
         t_roll, t_pitch, t_yaw = euler_zyx(rot_zyx(s.roll, s.pitch, s.yaw) @ self._mount)
         sp, cp = math.sin(t_pitch), math.cos(t_pitch)
