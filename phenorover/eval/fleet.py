@@ -86,10 +86,12 @@ def write_deployment(
     seed: int,
     partition: str | None,
     starts: list[tuple[float, float, float]] | None = None,
+    scan_s: float | None = None,
 ) -> tuple[Path, dict[str, Path], Relay | None]:
     """The world's and each robot's manifests under ``out`` (from ``deploy/fleet``'s,
     on free loopback ports), and the relay of the partitioned robot's link; ``starts``:
-    the robots' start poses (x, y, heading in degrees) instead of the world's homes."""
+    the robots' start poses (x, y, heading in degrees) instead of the world's homes;
+    ``scan_s``: sim seconds a scan takes (None: the scanner profile's)."""
     world = tomllib.loads((DEPLOY / "world.toml").read_text())
     port = free_loopback_port()
     world |= {"field": str(field), "run_dir": str(out / "world")}
@@ -119,7 +121,10 @@ def write_deployment(
                 "connect": [f"tcp/127.0.0.1:{target}"],
             },
         }
-        rover["services"]["scanner"]["storage_dir"] = str(out / name / "scanner-card")
+        scanner = rover["services"]["scanner"]
+        scanner["storage_dir"] = str(out / name / "scanner-card")
+        if scan_s is not None:
+            scanner["sim_scan_time_s"] = scan_s
         mission = rover["services"]["mission"]
         mission["share"] = k if robots > 1 else 0  # one robot takes a plan's one part
         mission["lanes"] = {"peers": [n for n in names(robots) if n != name]}
@@ -153,9 +158,11 @@ def run(
     faults: Faults = Faults(),
     timeout_s: float = 3600.0,
     say: Any = print,
+    scan_s: float | None = None,
 ) -> Outcome:
     """One survey of ``field`` by ``robots`` robots (see the module docstring); the
-    plan made with ``options`` for that many robots. Raises RuntimeError, one line,
+    plan made with ``options`` for that many robots; ``scan_s``: sim seconds a scan
+    takes (None: the scanner profile's). Raises RuntimeError, one line,
     when the deployment does not come up, a mission cannot start, or one has not ended
     within ``timeout_s``."""
     from services.planner.core import plan as make_plan
@@ -163,7 +170,9 @@ def run(
     layout, fld = load_field(field)
     plan = make_plan(layout, field=fld, options=msgspec.structs.replace(options, robots=robots))
     cut = faults.partition[0] if faults.partition else None
-    world, rovers, relay = write_deployment(out, field, robots, rtf, seed, cut, starts(plan))
+    world, rovers, relay = write_deployment(
+        out, field, robots, rtf, seed, cut, starts(plan), scan_s
+    )
     launchers = {"world": Launcher(world), **{n: Launcher(m) for n, m in rovers.items()}}
     outcome = Outcome(plan, {}, {n: [] for n in rovers}, {})
     try:

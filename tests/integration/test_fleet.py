@@ -19,9 +19,10 @@ TINY = REPO / "tests" / "data" / "tiny.toml"
 def test_two_robots_share_the_tiny_field_and_a_killed_supervisor_changes_nothing(
     tmp_path: Path,
 ) -> None:
-    options = PlanOptions(tour_time_limit_s=1.0, pace=Pace(speed=0.3, location_s=120.0))
+    # scans of 20 s, not the FARO's minute: what is shared is the lanes, while driving
+    options = PlanOptions(tour_time_limit_s=1.0, pace=Pace(speed=0.3, location_s=60.0))
     kill = fleet.Faults(kill=("rover1", 20.0))  # sim seconds: on its way to its first scan
-    out = fleet.run(TINY, tmp_path, 2, options, rtf=10.0, faults=kill, timeout_s=600)
+    out = fleet.run(TINY, tmp_path, 2, options, rtf=10.0, faults=kill, timeout_s=600, scan_s=20.0)
     assert out.notes and "killed" in out.notes[0], out.notes
     for name, state in out.final.items():
         assert state is not None and state.phase == MissionPhase.DONE, (name, state)
