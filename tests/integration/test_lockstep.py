@@ -1,8 +1,8 @@
 """The same seed gives the same survey whatever the pace and the load: the tiny field
-surveyed by ``phenorover sim`` in lockstep three times (as fast as it goes, capped
-at a real-time factor, and beside a busy loop on both cores) leaves identical
-mission logs: every step's status, times and scan pose to the last bit, and every
-event of the survey."""
+surveyed by ``phenorover sim`` in lockstep three times (as fast as it goes on a quiet
+machine, then, at the same time, as fast as it goes beside a busy loop on both cores
+and capped at a real-time factor) leaves identical mission logs: every step's
+status, times and scan pose to the last bit, and every event of the survey."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import re
 import subprocess
 import sys
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -22,8 +23,11 @@ TINY = REPO / "tests" / "data" / "tiny.toml"
 FILES = re.compile(r"summary: .*; files in (\S+)")
 
 
-def manifest(tmp: Path, rtf: float) -> Path:
-    path = tmp / f"lockstep-{rtf:g}.toml"
+def manifest(tmp: Path, name: str, rtf: float) -> Path:
+    """A deployment of its own (``name``: its run folder and scanner card) at ``rtf``."""
+    tmp = tmp / name
+    tmp.mkdir()
+    path = tmp / "lockstep.toml"
     path.write_text(f"""
 machine = "sim"
 clock = "sim"
@@ -72,17 +76,18 @@ def survey(path: Path) -> Path:
 
 def what_happened(run: Path) -> tuple[list[Any], list[Any]]:
     """The survey's steps (all their columns) and its events up to its end, the
-    mission's name (a wall-clock date) taken out."""
+    mission's name (a wall-clock date) and its deployment's folder taken out."""
     log = read_log(run / "mission.db")
     assert log.mission is not None
-    name = log.mission["id"]
-    steps = [
-        tuple(v.replace(name, "M") if isinstance(v, str) else v for v in vars(s).values())
-        for s in log.steps
-    ]
+    name, folder = log.mission["id"], str(run.parent.parent)
+
+    def same(v: Any) -> Any:
+        return v.replace(name, "M").replace(folder, "D") if isinstance(v, str) else v
+
+    steps = [tuple(same(v) for v in vars(s).values()) for s in log.steps]
     events = []
     for stamp, level, text in log.events:
-        events.append((stamp, level, text.replace(name, "M")))
+        events.append((stamp, level, same(text)))
         if text == f"mission {name} done":
             break
     return steps, events
@@ -112,7 +117,7 @@ def busy_cores(n: int = 2) -> Iterator[None]:
 
 
 def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path: Path) -> None:
-    first = survey(manifest(tmp_path, 1000.0))
+    first = survey(manifest(tmp_path, "fast", 1000.0))
     fast = what_happened(first)
     steps, events = fast
     # what each service cost over the survey, from the launcher's reading of /proc
@@ -125,8 +130,12 @@ def test_the_same_seed_gives_the_same_survey_at_any_pace_and_under_load(tmp_path
     # every service's configuration, the mission's own too (asked mid-step)
     saved = (first / "config.toml").read_text()
     assert all(f"[services.{n}]" in saved for n in use.cpu_s), saved
-    with busy_cores():
-        loaded = what_happened(survey(manifest(tmp_path, 1000.0)))
-    paced = what_happened(survey(manifest(tmp_path, 4.0)))
+    # the loaded survey and the paced one side by side: each is load for the other too
+    with busy_cores(), ThreadPoolExecutor(2) as pool:
+        runs = [
+            pool.submit(survey, manifest(tmp_path, name, rtf))
+            for name, rtf in (("loaded", 1000.0), ("paced", 4.0))
+        ]
+        loaded, paced = (what_happened(r.result()) for r in runs)
     assert loaded == fast, first_difference(fast, loaded)
     assert paced == fast, first_difference(fast, paced)
