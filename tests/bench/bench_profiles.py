@@ -38,7 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from phenorover.eval.calibration_table import AGAINST_PAPER, OURS_AGAINST
 from phenorover.eval.results import Bench, Goal, seed_runs
-from tests.bench.bench_nav import PLACED, REPO, models, run_experiment
+from tests.bench.bench_nav import REPO, models, run_experiment
+from tests.bench.survey_pace import TRUE_STOP
 
 PROFILES = ("paper", "ours")
 EXPERIMENTS = ("border", "serpentine", "stationary")
@@ -184,7 +185,7 @@ def main() -> int:
                 means[(profile, name)] = value
             goal = None
             if profile == "ours" and key == "true_stop_to_planned_cm":
-                goal = Goal("<=", 1.0, PLACED)
+                goal = TRUE_STOP
             if profile == "ours" and key == "xte_p99_cm":
                 goal = Goal("<=", LANE_CLEARANCE_CM, TAIL)
             if key.startswith("xte_"):  # like with like: both at their cruise speed
