@@ -192,8 +192,9 @@ def record(bench: Bench, exp: str, s: dict[str, Any] | None, why: str) -> None:
     fig("time held", get("hold_s"), "s")
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options of a benchmark of nav-test's experiments (this one and
+    bench_profiles): its output, the world's pace, which experiments, what is kept."""
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--rtf", type=float, default=1000.0, help="the world's pace (in lockstep: cap)")
     ap.add_argument("--free", action="store_true", help="the world beside the services")
@@ -203,6 +204,11 @@ def main() -> int:
         action="store_true",
         help="the experiments not run keep their figures from the --json file",
     )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(ap)
     args = ap.parse_args()
     bench = Bench("bench_nav")
     details: dict[str, Any] = {}

@@ -38,11 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from phenorover.eval.calibration_table import AGAINST_PAPER, OURS_AGAINST
 from phenorover.eval.results import Bench, Goal, seed_runs
-from tests.bench.bench_nav import REPO, models, run_experiment
+from tests.bench.bench_nav import EXPERIMENTS, REPO, add_arguments, models, run_experiment
 from tests.bench.survey_pace import TRUE_STOP
 
 PROFILES = ("paper", "ours")
-EXPERIMENTS = ("border", "serpentine", "stationary")
 # (experiment, stats.json key, figure, unit, scale, the paper's field figure)
 METRICS = (
     ("border", "xte_mean_cm", "border: mean cross-track error, true pose", "cm", 1.0, 2.37),
@@ -125,18 +124,10 @@ def cruise_speed(profile: str) -> float:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--json", type=Path, default=None)
+    add_arguments(ap)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument(
         "--runs", type=int, default=1, help="runs of each seed (with --free: not repeatable)"
-    )
-    ap.add_argument("--rtf", type=float, default=1000.0, help="the world's pace (in lockstep: cap)")
-    ap.add_argument("--free", action="store_true", help="the world beside the services")
-    ap.add_argument("--experiments", nargs="+", choices=EXPERIMENTS, default=list(EXPERIMENTS))
-    ap.add_argument(
-        "--keep",
-        action="store_true",
-        help="the experiments not run keep their figures from the --json file",
     )
     args = ap.parse_args()
     bench = Bench("bench_profiles")
