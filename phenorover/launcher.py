@@ -33,7 +33,7 @@ import zenoh
 
 from common import keys
 from common.acl_log import DenialLog
-from common.config import ConfigError
+from common.config import ConfigError, load_manifest
 from common.messages.sim import SimRun
 from common.process import die_with_parent
 from common.transport import Bus
@@ -248,8 +248,6 @@ def held_world(manifest: Path) -> dict[str, list[str]]:
     in lockstep: its world stands at its start until :func:`release_world`, so that
     whoever starts a survey or an experiment does so first and the same seed gives the
     same run; none for a free-running one. Raises ConfigError for a bad manifest."""
-    from common.config import load_manifest
-
     return {"sim": ["--set", "start_held=true"]} if load_manifest(manifest).lockstep else {}
 
 

@@ -84,9 +84,9 @@ def follow(
     route_id: str,
     timeout: float,
     release: Release = None,
-) -> NavState:
+) -> NavProgress:
     """Send the route, then ``release`` a held world (lockstep), and wait for the
-    route's end: ARRIVED, BLOCKED or FAILED."""
+    route's end: its last progress (ARRIVED, BLOCKED or FAILED, and why)."""
     deadline = time.monotonic() + 15
     while True:
         try:
@@ -109,6 +109,6 @@ def follow(
             renewed = time.monotonic()
         p = rec.progress
         if p is not None and p.route_id == route_id and p.state in ENDED:
-            return p.state
+            return p
         time.sleep(0.2)
     raise TimeoutError(f"route {route_id} not finished within {timeout:.0f} s")

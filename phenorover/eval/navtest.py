@@ -165,9 +165,7 @@ def _experiment(
     legs = ex.legs_through(pts)
     length = sum(math.hypot(lg.x1 - lg.x0, lg.y1 - lg.y0) for lg in legs)
     timeout = 60 + 20 * length / pace(args.rtf, release)
-    state = follow(bus, rec, legs, args.experiment, timeout=timeout, release=release)
-    # why the route ended so (a FAILED route says why in its last progress)
-    ended = rec.progress.detail if rec.progress is not None else ""
+    ended = follow(bus, rec, legs, args.experiment, timeout=timeout, release=release)
     route = rec.paired(args.experiment)
     rows = [(t, p) for t, p in route if p.state == NavState.DRIVING]
     xy = np.array([[t.x, t.y] for t, _ in rows])
@@ -199,8 +197,8 @@ def _experiment(
     path = np.array([[t.x, t.y] for t, _ in route])  # the distance driven: the true path
     return {
         "experiment": args.experiment,
-        "result": state.value,
-        "result_detail": ended,
+        "result": ended.state.value,
+        "result_detail": ended.detail,
         "planned_route_m": length,
         "driven_true_m": ex.path_length(path),
         **ex.track_stats(xte, herr),

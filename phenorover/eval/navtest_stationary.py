@@ -28,8 +28,7 @@ def stationary(
     # the last leg ends as the mission's legs to a scan location do: without a
     # planned heading (services/planner/waypoints.py), the robot holds the leg's
     legs = ex.legs_through([(ox, oy), (goal[0], oy), goal])
-    state = follow(bus, rec, legs, "stationary", timeout=600, release=release)
-    ended = rec.progress.detail if rec.progress is not None else ""
+    ended = follow(bus, rec, legs, "stationary", timeout=600, release=release)
     # the hold: from the route's end for ``hold`` seconds of sim time, by the stamps
     # (in lockstep the same seed then holds over the same samples)
     end = rec.paired("stationary")
@@ -55,8 +54,8 @@ def stationary(
     z_true = float(np.mean([t.z for t in truths]))
     return {
         "experiment": "stationary",
-        "result": state.value,
-        "result_detail": ended,
+        "result": ended.state.value,
+        "result_detail": ended.detail,
         "hold_s": args.hold,
         "goal": list(g),
         # the headline in simulation: where the robot truly stands against the plan

@@ -41,9 +41,6 @@ from tests.bench.survey_pace import TRUE_STOP
 
 REPO = Path(__file__).resolve().parents[2]
 EXPERIMENTS = ("border", "serpentine", "stationary")
-# what would close a missed stop depends on where the error is, which the run shows:
-# the estimate itself off the plan (the robot was placed, then moved) or the estimate
-# on the plan and off the truth (what the estimate does not know)
 CORNERS = (
     "a tracker that closes the corner turn's sideways shift faster (yaw-rate feedback, "
     "a regulated look-ahead), and a filter that averages the crop's correlated fix noise "
